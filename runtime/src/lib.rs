@@ -93,6 +93,7 @@ pub mod idle;
 pub mod lent;
 pub mod log;
 mod mailbox;
+mod mapping;
 mod monitor;
 pub mod port;
 #[cfg(feature = "process")]
@@ -101,6 +102,7 @@ pub mod ranges;
 pub mod record;
 mod refused;
 pub mod remote;
+pub mod ring;
 pub mod ros;
 mod runner;
 pub mod schema;

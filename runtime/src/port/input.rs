@@ -91,11 +91,24 @@ pub(crate) struct FifoInner<T> {
     pub(super) policy: OverflowPolicy,
     pub(super) capacity: usize,
     pub(super) block_timeout: Duration,
+    /// What may take a packet on the sender's thread instead of the queue.
+    intake: OnceLock<Arc<dyn Intake<T>>>,
+}
+
+/// Takes packets delivered to a fifo input on the sending thread, ahead of the queue
+/// ([`FifoIn::set_intake`]): a network outlet that writes a packet straight into
+/// shared memory, sparing its own thread a wake-up.
+pub trait Intake<T>: Send + Sync {
+    /// Take `packet` now, on the sender's thread (true: it is not queued, does not
+    /// ring the input's component and is not counted as an arrival), or leave it to
+    /// the queue (false). It must not wait, and keeps order itself: it declines
+    /// while packets are queued that it has not taken.
+    fn offer(&self, packet: &T) -> bool;
 }
 
 impl<T: Packet> Deliver<T> for FifoInner<T> {
     fn input_bell(&self) -> Option<Arc<Doorbell>> {
-        self.core.owner.get().map(|owner| Arc::clone(&owner.bell))
+        self.core.bell()
     }
 
     fn lost(&self, count: u64) {
@@ -110,6 +123,11 @@ impl<T: Packet> Deliver<T> for FifoInner<T> {
 
     #[inline]
     fn deliver(&self, packet: Parcel<T>) {
+        if let Some(intake) = self.intake.get()
+            && intake.offer(packet.get())
+        {
+            return;
+        }
         match self.sender().try_send(packet) {
             Ok(()) => {}
             Err(TrySendError::Full(packet)) => self.deliver_full(packet),
@@ -205,8 +223,26 @@ impl<T: Packet> FifoIn<T> {
                 policy,
                 capacity,
                 block_timeout,
+                intake: OnceLock::new(),
             }),
         }
+    }
+
+    /// Let `intake` take each packet delivered from now on, on the sender's thread,
+    /// before it is queued; false (and nothing changes) if the input has one already.
+    pub fn set_intake(&self, intake: Arc<dyn Intake<T>>) -> bool {
+        self.inner.intake.set(intake).is_ok()
+    }
+
+    /// The doorbell of the component this input is a port of, once the component is
+    /// in a system: where another process on this host rings it
+    /// ([`ConsumerBell::address`](crate::ConsumerBell::address)), and the sources its
+    /// thread drains.
+    pub fn owner_bell(&self) -> Option<crate::ConsumerBell> {
+        self.inner
+            .core
+            .bell()
+            .map(|bell| crate::ConsumerBell { bell })
     }
 
     /// The oldest queued packet. A packet its producer sent to several inputs is
@@ -309,7 +345,7 @@ pub(super) struct UfifoQueue<T> {
 
 impl<T: Packet> Deliver<T> for UfifoInner<T> {
     fn input_bell(&self) -> Option<Arc<Doorbell>> {
-        self.core.owner.get().map(|owner| Arc::clone(&owner.bell))
+        self.core.bell()
     }
 
     fn lost(&self, count: u64) {
@@ -345,6 +381,15 @@ impl<T: Packet> Deliver<T> for UfifoInner<T> {
 }
 
 impl<T: Packet> UfifoIn<T> {
+    /// The doorbell of the component this input is a port of, once the component is
+    /// in a system (as [`FifoIn::owner_bell`]).
+    pub fn owner_bell(&self) -> Option<crate::ConsumerBell> {
+        self.inner
+            .core
+            .bell()
+            .map(|bell| crate::ConsumerBell { bell })
+    }
+
     /// A ufifo starting at `initial` packets (at least 1), growing by `initial` when
     /// full, never beyond `max` if given.
     pub fn new(initial: usize, max: Option<usize>) -> UfifoIn<T> {
@@ -451,7 +496,7 @@ impl<T> LastInner<T> {
 
 impl<T: Packet> Deliver<T> for LastInner<T> {
     fn input_bell(&self) -> Option<Arc<Doorbell>> {
-        self.core().owner.get().map(|owner| Arc::clone(&owner.bell))
+        self.core().bell()
     }
 
     fn lost(&self, count: u64) {

@@ -225,7 +225,6 @@ mod mapped {
     //! The process's mapping of bells, and another process's.
 
     use super::{BellAddress, STRIDE};
-    use std::os::fd::{AsRawFd, OwnedFd};
     use std::sync::atomic::{AtomicU32, Ordering};
     use std::sync::{Mutex, OnceLock, PoisonError};
 
@@ -242,14 +241,19 @@ mod mapped {
     const MAGIC: u32 = 0xC001_BE12;
 
     struct Mapping {
-        words: &'static [AtomicU32],
-        /// Kept open for the process's life: other processes open it by its number.
-        fd: OwnedFd,
+        /// Never dropped: the words live as long as the process.
+        shared: crate::mapping::Mapping,
         nonce: u64,
         /// Pairs given back, and the next never taken.
         free: Mutex<(Vec<u32>, u32)>,
         /// The process that made it (a child forked from it leaves it alone).
         owner: u32,
+    }
+
+    impl Mapping {
+        fn words(&'static self) -> &'static [AtomicU32] {
+            self.shared.u32s()
+        }
     }
 
     static MAPPING: OnceLock<Option<Mapping>> = OnceLock::new();
@@ -259,42 +263,18 @@ mod mapped {
     }
 
     fn make() -> Option<Mapping> {
-        use rustix::fs::{MemfdFlags, SealFlags, fcntl_add_seals, ftruncate, memfd_create};
-        use rustix::mm::{MapFlags, ProtFlags, mmap};
-        let fd = memfd_create(
-            "coolbot-bells",
-            MemfdFlags::CLOEXEC | MemfdFlags::ALLOW_SEALING,
-        )
-        .ok()?;
-        ftruncate(&fd, BYTES as u64).ok()?;
-        // No process may shrink it under the mappings (nor grow it, nor unseal it).
-        fcntl_add_seals(&fd, SealFlags::SHRINK | SealFlags::GROW | SealFlags::SEAL).ok()?;
-        // A shared mapping of the memfd, never unmapped: the words live as long as the
-        // process, so a `&'static` to them is sound.
-        #[allow(unsafe_code, reason = "a fresh shared mapping, never unmapped")]
-        let words = unsafe {
-            let base = mmap(
-                std::ptr::null_mut(),
-                BYTES,
-                ProtFlags::READ | ProtFlags::WRITE,
-                MapFlags::SHARED,
-                &fd,
-                0,
-            )
-            .ok()?;
-            std::slice::from_raw_parts(base.cast::<AtomicU32>(), BYTES / 4)
-        };
+        let shared = crate::mapping::Mapping::create("coolbot-bells", BYTES).ok()?;
         let nonce = {
             use std::hash::BuildHasher;
             std::collections::hash_map::RandomState::new()
                 .hash_one((std::process::id(), std::time::SystemTime::now()))
         };
+        let words = shared.u32s();
         words[0].store(MAGIC, Ordering::SeqCst);
         words[2].store(nonce as u32, Ordering::SeqCst);
         words[3].store((nonce >> 32) as u32, Ordering::SeqCst);
         Some(Mapping {
-            words,
-            fd,
+            shared,
             nonce,
             free: Mutex::new((Vec::new(), FIRST_PAIR)),
             owner: std::process::id(),
@@ -316,7 +296,7 @@ mod mapped {
             }
         };
         let start = (pair * STRIDE) as usize;
-        let words: &'static [AtomicU32; 2] = mapping.words[start..start + 2].try_into().ok()?;
+        let words: &'static [AtomicU32; 2] = mapping.words()[start..start + 2].try_into().ok()?;
         Some(super::Pair { words, place: pair })
     }
 
@@ -326,8 +306,8 @@ mod mapped {
             // Quiet, and sleeping on itself: a ringer still holding its address (in
             // another process) rings a bell nobody waits on.
             let start = pair * STRIDE;
-            mapping.words[start as usize].store(0, Ordering::SeqCst);
-            mapping.words[start as usize + 1].store(start, Ordering::SeqCst);
+            mapping.words()[start as usize].store(0, Ordering::SeqCst);
+            mapping.words()[start as usize + 1].store(start, Ordering::SeqCst);
             let mut free = mapping.free.lock().unwrap_or_else(PoisonError::into_inner);
             free.0.push(pair);
         }
@@ -337,7 +317,7 @@ mod mapped {
         let mapping = mapping().filter(|mapping| mapping.owner == std::process::id())?;
         Some(BellAddress {
             pid: std::process::id(),
-            fd: mapping.fd.as_raw_fd(),
+            fd: mapping.shared.fd()?,
             nonce: mapping.nonce,
             pair,
         })
@@ -345,77 +325,29 @@ mod mapped {
 
     /// Another process's mapping of bells, mapped here; unmapped when dropped.
     pub(super) struct Foreign {
-        base: std::ptr::NonNull<AtomicU32>,
+        shared: crate::mapping::Mapping,
     }
-
-    // Shared atomics only.
-    #[allow(unsafe_code, reason = "the mapping is atomics, shared by design")]
-    unsafe impl Send for Foreign {}
-    #[allow(unsafe_code, reason = "the mapping is atomics, shared by design")]
-    unsafe impl Sync for Foreign {}
 
     impl Foreign {
         pub(super) fn open(address: &BellAddress) -> std::io::Result<Foreign> {
-            use rustix::mm::{MapFlags, ProtFlags, mmap};
-            let path = format!("/proc/{}/fd/{}", address.pid, address.fd);
-            let file = std::fs::OpenOptions::new()
-                .read(true)
-                .write(true)
-                .open(&path)?;
-            let size = file.metadata()?.len();
-            // Sealed at its size by its maker: it cannot shrink under this mapping.
-            let sealed = rustix::fs::fcntl_get_seals(&file)
-                .is_ok_and(|seals| seals.contains(rustix::fs::SealFlags::SHRINK));
-            if size != BYTES as u64 || !sealed {
-                return Err(std::io::Error::new(
-                    std::io::ErrorKind::InvalidData,
-                    format!("{path} is no mapping of bells ({size} bytes)"),
-                ));
-            }
-            // A shared mapping of the other process's bells, unmapped by `Drop` only.
-            #[allow(unsafe_code, reason = "a fresh shared mapping, unmapped by Drop")]
-            let base = unsafe {
-                mmap(
-                    std::ptr::null_mut(),
-                    BYTES,
-                    ProtFlags::READ | ProtFlags::WRITE,
-                    MapFlags::SHARED,
-                    &file,
-                    0,
-                )?
-            };
-            let foreign = Foreign {
-                base: std::ptr::NonNull::new(base.cast::<AtomicU32>())
-                    .ok_or_else(|| std::io::Error::other("mmap gave a null mapping"))?,
-            };
-            let words = foreign.words();
+            let shared = crate::mapping::Mapping::open(address.pid, address.fd, BYTES)?;
+            let words = shared.u32s();
             let nonce = u64::from(words[2].load(Ordering::SeqCst))
                 | (u64::from(words[3].load(Ordering::SeqCst)) << 32);
             if words[0].load(Ordering::SeqCst) != MAGIC || nonce != address.nonce {
                 return Err(std::io::Error::new(
                     std::io::ErrorKind::NotFound,
-                    format!("{path} is not the bells it was said to be (another process)"),
+                    format!(
+                        "/proc/{}/fd/{} is not the bells it was said to be (another process)",
+                        address.pid, address.fd
+                    ),
                 ));
             }
-            Ok(foreign)
+            Ok(Foreign { shared })
         }
 
         pub(super) fn words(&self) -> &[AtomicU32] {
-            // Mapped in `open` with `BYTES`, until `Drop`.
-            #[allow(unsafe_code, reason = "the mapping made in `open`")]
-            unsafe {
-                std::slice::from_raw_parts(self.base.as_ptr(), BYTES / 4)
-            }
-        }
-    }
-
-    impl Drop for Foreign {
-        fn drop(&mut self) {
-            // Mapped in `open` with `BYTES`; nothing refers to it past `self`.
-            #[allow(unsafe_code, reason = "the mapping made in `open`")]
-            unsafe {
-                let _ = rustix::mm::munmap(self.base.as_ptr().cast(), BYTES);
-            }
+            self.shared.u32s()
         }
     }
 }

@@ -249,7 +249,7 @@ pub(crate) trait PortBridge: Send + Sync {
         key: &str,
     ) -> (
         PortSet,
-        crate::bridge::DeliverFn,
+        crate::delivery::DeliverFn,
         Arc<crate::ledger::InletLedger>,
     );
     /// An inlet of `kind` on `key` (a pull inlet when `pull`, its requests waiting
@@ -292,7 +292,7 @@ impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
         if let Some(timeout) = pull {
             builder = builder.pull(timeout);
         }
-        let (_, mut outlet, _) = builder.parts()?;
+        let (_, mut outlet, _) = builder.parts(false)?;
         let ports = outlet.add_input(ports);
         Ok((ports, Box::new(move || outlet.pump())))
     }
@@ -306,7 +306,7 @@ impl<T: Packet + Serialize + DeserializeOwned> PortBridge for Typed<T> {
         key: &str,
     ) -> (
         PortSet,
-        crate::bridge::DeliverFn,
+        crate::delivery::DeliverFn,
         Arc<crate::ledger::InletLedger>,
     ) {
         crate::bridge::proxy_output::<T>(node, ports, kind, losses, key)

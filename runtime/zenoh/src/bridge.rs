@@ -42,7 +42,9 @@ use zenoh::query::{ConsolidationMode, QueryTarget};
 
 use crate::backlog::{Backlog, LostFn};
 use crate::codec;
+use crate::delivery::{DeliverFn, Via};
 use crate::ledger::{self, InletLedger, OutletLedger};
+use crate::nearby::{InletRings, Inline, Nearby};
 use crate::shm::Arena;
 use crate::tally::Tally;
 use crate::{Error, Node, keys};
@@ -435,7 +437,10 @@ pub(crate) struct Outlet<T> {
     /// Dropped first: its last questions go before the tally says the epoch stopped
     /// cleanly.
     _ledger: Option<OutletLedger>,
-    wire: Wire,
+    wire: Arc<Wire>,
+    /// A fifo or ufifo outlet's path to a consumer on this host (`crate::nearby`):
+    /// sends what waits at the input, by a ring or on the key.
+    nearby: Option<Box<dyn Fn() + Send + Sync>>,
     pull: bool,
     epoch: u64,
     seq: Arc<AtomicU64>,
@@ -458,13 +463,15 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
     /// return the component (add it to the producer's system and connect the
     /// producer's output to `<name>.input`).
     pub fn build(self) -> Result<Component, Error> {
-        let (name, outlet, ports) = self.parts()?;
+        let (name, outlet, ports) = self.parts(true)?;
         Ok(Component::new(name, Box::new(outlet), ports))
     }
 
     /// What [`OutletBuilder::build`] makes, unassembled: the name, the outlet, its
-    /// port set (a proxy, `crate::place`, takes the outlet's input as its own).
-    pub(crate) fn parts(self) -> Result<(String, Outlet<T>, PortSet), Error> {
+    /// port set (a proxy, `crate::place`, takes the outlet's input as its own);
+    /// `nearby`: a queue outlet writes into a ring of a consumer on this host when it
+    /// finds one (`crate::nearby`; not a proxy's).
+    pub(crate) fn parts(self, nearby: bool) -> Result<(String, Outlet<T>, PortSet), Error> {
         let OutletBuilder {
             node,
             name,
@@ -696,18 +703,63 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
         } else {
             None
         };
+        let wire = Arc::new(Wire {
+            key,
+            publisher,
+            matching,
+            losses: erased,
+            tally,
+            arena: Arena::new(session, node.shared_memory_counters()),
+        });
+        let nearby = (nearby && pull.is_none() && node.same_host())
+            .then(|| {
+                let link = {
+                    let (wire, sent) = (Arc::clone(&wire), Arc::clone(&sent));
+                    Box::new(move |packet: &T| wire.send_numbered(epoch, &sent, packet))
+                };
+                let outlet = format!("{}/{name}", node.name());
+                let (key, tally) = (&wire.key, wire.tally.clone());
+                let sent = Arc::clone(&sent);
+                match &input {
+                    OutletInput::Fifo(port) => {
+                        let nearby = Nearby::new(
+                            session,
+                            key,
+                            outlet,
+                            epoch,
+                            sent,
+                            tally,
+                            port.clone(),
+                            link,
+                            node.shared_memory_counters(),
+                        );
+                        port.set_intake(Arc::new(Inline(Arc::downgrade(&nearby))));
+                        Some(Box::new(move || nearby.forward()) as Box<dyn Fn() + Send + Sync>)
+                    }
+                    OutletInput::Ufifo(port) => {
+                        let nearby = Nearby::new(
+                            session,
+                            key,
+                            outlet,
+                            epoch,
+                            sent,
+                            tally,
+                            port.clone(),
+                            link,
+                            node.shared_memory_counters(),
+                        );
+                        Some(Box::new(move || nearby.forward()) as Box<dyn Fn() + Send + Sync>)
+                    }
+                    _ => None,
+                }
+            })
+            .flatten();
         let outlet = Outlet {
             spec,
             input,
             _ledger: ledger,
-            wire: Wire {
-                key,
-                publisher,
-                matching,
-                losses: erased,
-                tally,
-                arena: Arena::new(session, node.shared_memory_counters()),
-            },
+            wire,
+            nearby,
             pull: pull.is_some(),
             epoch,
             seq,
@@ -749,6 +801,10 @@ impl<T: Packet + Serialize> Outlet<T> {
     fn forward(&mut self) {
         if self.pull {
             // Pull answers go to the querier only, from the pull thread.
+            return;
+        }
+        if let Some(nearby) = &self.nearby {
+            nearby();
             return;
         }
         let wire = &self.wire;
@@ -882,23 +938,6 @@ enum InletOutput<T> {
     Poster(PosterOut<T>),
 }
 
-/// What delivers one message of a bridge key, and how it came: it takes the payload
-/// as Zenoh holds it, and checks its length before copying or decoding it.
-pub(crate) type DeliverFn = Arc<dyn Fn(&ZBytes, Via) + Send + Sync>;
-
-/// How a message reached an inlet: on the key's stream (numbered, counted by the
-/// ledger), or as the answer to a query (the current value of a `last` or poster
-/// outlet, or a pull), which the ledger does not count.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Via {
-    Stream,
-    /// The current value of a `last` or poster outlet, on Zenoh's receiving thread.
-    Answer,
-    /// The answer to a pull request, on the inlet's (or proxy's) own thread while it
-    /// answers the request: sent to the requesting input alone, at once.
-    Pull,
-}
-
 /// How far an answer's number may run ahead of the stream for the stream's
 /// messages behind it to be dropped as stale: the messages in flight on the stream
 /// when the outlet answered. Further behind, the answer is forgotten and the stream
@@ -984,6 +1023,10 @@ struct Inlet {
     watcher: Option<zenoh::pubsub::Subscriber<()>>,
     /// Answers the outlets' questions on what it has had (not a pull inlet).
     _acks: Option<zenoh::query::Queryable<()>>,
+    /// Rings for outlets of this host (a data inlet, shared memory on:
+    /// `crate::nearby`), and, while started, what answers their questions.
+    rings: Option<Arc<InletRings>>,
+    ring_questions: Option<zenoh::query::Queryable<()>>,
     _token: zenoh::liveliness::LivelinessToken,
 }
 
@@ -1275,6 +1318,17 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             network: network.erased(),
             resets: resets.erased(),
         };
+        // The consumer's doorbell, asked when an outlet of this host asks for a ring.
+        let consumer = match &output {
+            InletOutput::Data(port) if pull.is_none() && node.same_host() => {
+                let port = port.clone();
+                Some(Box::new(move || port.consumer_bell())
+                    as Box<
+                        dyn Fn() -> Option<coolbot::ConsumerBell> + Send + Sync,
+                    >)
+            }
+            _ => None,
+        };
         let (deliver, ledger) = deliverer(
             output,
             counters,
@@ -1282,6 +1336,16 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             key.clone(),
             max_payload,
         );
+        let rings = consumer.map(|consumer| {
+            InletRings::new(
+                &key,
+                Arc::clone(&deliver),
+                Arc::clone(&ledger),
+                consumer,
+                network.erased(),
+                node.shared_memory_counters(),
+            )
+        });
         let acks = match pull {
             Some(_) => None,
             None => Some(
@@ -1298,6 +1362,8 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             subscriber: None,
             watcher: None,
             _acks: acks,
+            rings,
+            ring_questions: None,
             _token: token,
         };
         Ok(Component::new(name, Box::new(inlet), ports))
@@ -1323,6 +1389,11 @@ impl Automaton for Inlet {
             .wait()
             .map_err(|error| Fault::message(format!("cannot subscribe: {}", Chain(&*error))))?;
         self.subscriber = Some(subscriber);
+        if let Some(rings) = &self.rings {
+            self.ring_questions = Some(rings.serve(&self.session).map_err(|error| {
+                Fault::message(format!("cannot answer for rings: {}", Chain(&error)))
+            })?);
+        }
         // The current value of a poster, or of a data connection to a remote `last`
         // input: asked for now (a late joiner), and again whenever a producer's outlet
         // appears on the network (a producer that starts, or a link that comes back:
@@ -1365,6 +1436,10 @@ impl Automaton for Inlet {
     fn stop(&mut self, _cx: &mut Context) {
         self.subscriber = None;
         self.watcher = None;
+        self.ring_questions = None;
+        if let Some(rings) = &self.rings {
+            rings.close();
+        }
     }
 
     /// A pull request from the consumer: one query on `K/@pull`; every answer that

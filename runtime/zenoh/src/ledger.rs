@@ -247,6 +247,14 @@ impl InletLedger {
         }
     }
 
+    /// The newest number of outlet `epoch` received, if any was.
+    pub(crate) fn newest(&self, epoch: u64) -> Option<u64> {
+        lock(&self.epochs)
+            .iter()
+            .find(|e| e.had.epoch == epoch)
+            .map(|e| e.had.newest)
+    }
+
     /// Message `seq` of outlet `epoch` arrived (0: a pull answer, not numbered).
     pub(crate) fn received(&self, epoch: u64, seq: u64) {
         if seq == 0 {

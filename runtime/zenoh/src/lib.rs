@@ -50,6 +50,7 @@ mod bridge;
 mod codec;
 mod config;
 pub mod ctl;
+mod delivery;
 pub mod echo;
 #[cfg(feature = "foxglove")]
 pub mod foxglove;
@@ -59,6 +60,7 @@ mod lanes;
 mod ledger;
 pub mod limits;
 mod loopback;
+mod nearby;
 pub mod network;
 mod node;
 pub mod place;

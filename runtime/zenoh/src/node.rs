@@ -117,6 +117,9 @@ pub struct Node {
     state: Option<PathBuf>,
     /// What its bridges did with shared memory (`crate::shm`).
     shared: Arc<crate::shm::Counters>,
+    /// Whether shared memory is on: large messages in Zenoh's, queue bridges to a
+    /// consumer on this host through a ring (`crate::nearby`).
+    shared_memory: bool,
     /// Its pool as the process's lender (`coolbot::Bytes::loan`).
     lender: Arc<crate::shm::PoolLender>,
     /// The thread its queryables' answers are sent from (`crate::reply`).
@@ -187,6 +190,7 @@ impl Node {
             echoes: Echoes::default(),
             state: crate::tally::state_directory(),
             shared,
+            shared_memory,
             lender,
             replies,
             _token: token,
@@ -224,6 +228,12 @@ impl Node {
     /// received in it (`docs/distribution.md`, "Same host: shared memory").
     pub fn shared_memory(&self) -> crate::SharedMemoryCounts {
         self.shared.counts()
+    }
+
+    /// Whether a queue bridge of this node looks for a ring to a consumer on this
+    /// host (`crate::nearby`): when shared memory is on.
+    pub(crate) fn same_host(&self) -> bool {
+        self.shared_memory
     }
 
     pub(crate) fn shared_memory_counters(&self) -> Arc<crate::shm::Counters> {

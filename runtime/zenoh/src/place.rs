@@ -24,7 +24,7 @@ use zenoh::Wait;
 use zenoh::sample::SampleKind;
 
 use crate::agent::{Instantiate, Pump, RemoteInput, RemoteTiming, Wire, instantiate};
-use crate::bridge::{DeliverFn, Via};
+use crate::delivery::{DeliverFn, Via};
 use crate::{ControlReply, Error, Node, keys};
 
 /// How long an instantiation, a command or a snapshot query waits for the other node

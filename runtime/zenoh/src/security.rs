@@ -117,10 +117,11 @@ const ALL_MESSAGES: [&str; 9] = [
 
 /// Key expressions that cover every key this crate uses: `**` does not match the
 /// verbatim `@` chunks, so those are named.
-const EVERY_KEY: [&str; 6] = [
+const EVERY_KEY: [&str; 7] = [
     "**",
     "coolbot/*/@agent/*/*",
     "**/@pull",
+    "**/@ring",
     "**/@out/**",
     "**/@in/**",
     "**/@ack/**",

@@ -66,6 +66,11 @@ pub struct SharedMemoryCounts {
     /// Messages its outlets sent with a loaned buffer as it was, not copied (also
     /// counted in `shared`).
     pub in_place: u64,
+    /// Messages its queue outlets wrote into a ring of a consumer on this host
+    /// (`docs/distribution.md`, "Same host: a ring"), not on the link.
+    pub ring_written: u64,
+    /// Messages its inlets took from rings their outlets wrote.
+    pub ring_taken: u64,
 }
 
 /// How long the first large message of a node waits for its session's pool to be made.
@@ -79,6 +84,8 @@ pub(crate) struct Counters {
     received: AtomicU64,
     loaned: AtomicU64,
     in_place: AtomicU64,
+    ring_written: AtomicU64,
+    ring_taken: AtomicU64,
     /// The session's pool, asked of the session once for the whole node.
     pool: OnceLock<Option<Arc<ShmProvider<PosixShmProviderBackend>>>>,
 }
@@ -91,7 +98,19 @@ impl Counters {
             received: self.received.load(Ordering::Relaxed),
             loaned: self.loaned.load(Ordering::Relaxed),
             in_place: self.in_place.load(Ordering::Relaxed),
+            ring_written: self.ring_written.load(Ordering::Relaxed),
+            ring_taken: self.ring_taken.load(Ordering::Relaxed),
         }
+    }
+
+    /// An outlet wrote a message into a ring.
+    pub(crate) fn ring_written(&self) {
+        self.ring_written.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// An inlet took `count` messages from a ring.
+    pub(crate) fn ring_taken(&self, count: usize) {
+        self.ring_taken.fetch_add(count as u64, Ordering::Relaxed);
     }
 
     /// An inlet or a proxy's output received `payload`: refused when it is longer

@@ -3,8 +3,10 @@
 //! and prints on stdout
 //! what the inlet's ledger records (`coolbot_zenoh::LEDGER_TARGET` at trace level),
 //! one line each as it happens: every numbered message received, and every
-//! acknowledgment answered. It prints `ready` once the inlet runs, and runs until it
-//! is killed or its standard input closes.
+//! acknowledgment answered. The inlet feeds a queue this process empties (a consumer
+//! on the host of a queue outlet: the outlet writes into its ring, `docs/distribution.md`).
+//! It prints `ready` once the inlet runs, and runs until it is killed or its standard
+//! input closes.
 
 use coolbot::{OutputKind, System};
 use coolbot_zenoh::Node;
@@ -51,9 +53,18 @@ fn consume<P: Streamed>(endpoint: String, key: &str) {
                 .expect("the inlet"),
         )
         .expect("added");
+    let (hand, handed) = coolbot::crossbeam_channel::bounded(1);
+    system.add(P::queue("queue", hand)).expect("added");
+    system
+        .connect("inlet.output", "queue.input")
+        .expect("connected");
     system.run_all().expect("runs");
+    let queue = handed
+        .recv_timeout(coolbot_zenoh_tests::support::PATIENCE)
+        .expect("the queue's input");
     println!("ready");
     loop {
-        std::thread::park();
+        while queue.recv().is_some() {}
+        std::thread::sleep(std::time::Duration::from_millis(5));
     }
 }

@@ -6,8 +6,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use coolbot::crossbeam_channel::{self, Sender};
-use coolbot::port::DataOut;
+use coolbot::crossbeam_channel::{self, Receiver, Sender};
+use coolbot::port::{DataOut, FifoIn};
 use coolbot::{Component, InputKind, MonitorEvent, OutputKind, OverflowPolicy, System};
 use coolbot_zenoh::{Error, Node};
 use coolbot_zenoh_tests::generated::types::Pose;
@@ -806,4 +806,185 @@ fn an_outlet_keeps_a_tally_except_on_a_remote_placements_keys() {
         .unwrap()
         .count();
     assert_eq!(files, 1, "the tally of `test/tallied` only");
+}
+
+/// Send `pose(seq)` for `seqs` one at a time, each taken from `sink` before the next.
+fn one_by_one(out: &DataOut<Pose>, sink: &FifoIn<Pose>, seqs: std::ops::Range<u64>) {
+    for seq in seqs {
+        out.send(pose(seq));
+        assert_eq!(sink.recv_timeout(PATIENCE), Some(pose(seq)));
+    }
+}
+
+#[test]
+fn a_queue_bridge_to_a_consumer_on_this_host_goes_through_a_ring() {
+    let (a, b) = pair("ring-a", "ring-b");
+    let key = "test/ring";
+    let (consumer, sink) = consumer(&b, key, OutputKind::Data, |hand| {
+        wide_queue::component("sink", Hand(hand))
+    });
+    let (producer, out) = data_producer(
+        &a,
+        key,
+        InputKind::Fifo {
+            capacity: 64,
+            policy: OverflowPolicy::Block,
+        },
+    );
+    wait_subscribed(&a, key);
+    // On the key until the inlet's answer is adopted, then by the ring.
+    let mut seq = 0;
+    assert!(
+        wait_until(PATIENCE, || {
+            one_by_one(&out, &sink, seq..seq + 1);
+            seq += 1;
+            a.shared_memory().ring_written > 0
+        }),
+        "the outlet never wrote into a ring"
+    );
+    let before = (a.shared_memory(), b.shared_memory());
+    one_by_one(&out, &sink, seq..seq + 100);
+    // A burst the sink's fifo holds, written by the producer's thread.
+    let burst = seq + 100..seq + 300;
+    for n in burst.clone() {
+        out.send(pose(n));
+    }
+    for n in burst {
+        assert_eq!(sink.recv_timeout(PATIENCE), Some(pose(n)));
+    }
+    let (written, taken) = (
+        a.shared_memory().ring_written - before.0.ring_written,
+        b.shared_memory().ring_taken - before.1.ring_taken,
+    );
+    assert_eq!((written, taken), (300, 300));
+    let outlet = producer.handle("outlet").unwrap().snapshot();
+    assert_eq!(outlet.overflows, 0, "{outlet:?}");
+    assert_eq!(consumer.handle("sink").unwrap().snapshot().overflows, 0);
+    let inlet = consumer.handle("inlet").unwrap().snapshot();
+    assert_eq!(inlet.overflows, 0, "{inlet:?}");
+    assert!(producer.shutdown().clean());
+    assert!(consumer.shutdown().clean());
+}
+
+/// A consumer whose thread is held in its entry section until the test lets it go,
+/// with a ufifo input it hands over (nothing it takes is lost).
+struct Held {
+    gate: Receiver<()>,
+}
+
+impl coolbot::Automaton for Held {
+    fn spec(&self) -> &'static coolbot::Spec {
+        static INPUTS: [coolbot::InputSpec; 1] = [coolbot::InputSpec {
+            name: "input",
+            kind: InputKind::Ufifo {
+                initial: 64,
+                max: None,
+            },
+            packet: "Pose",
+            pull: false,
+        }];
+        static SPEC: coolbot::Spec = coolbot::Spec {
+            type_name: "Held",
+            doc: "Enters its state when the test lets it.",
+            states: &[coolbot::StateSpec {
+                name: "held",
+                entry: true,
+                exit: false,
+                periodic: None,
+                on: &[],
+                after: &[],
+                may: &[],
+            }],
+            initial: 0,
+            inputs: &INPUTS,
+            outputs: &[],
+            variables: &[],
+            exceptions: &[],
+            timing: coolbot::TimingSpec::NONE,
+        };
+        &SPEC
+    }
+
+    fn section(
+        &mut self,
+        _state: usize,
+        section: coolbot::Section,
+        _cx: &mut coolbot::Context,
+    ) -> Result<(), coolbot::Fault> {
+        if section == coolbot::Section::Entry {
+            let _ = self.gate.recv_timeout(PATIENCE);
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn a_full_ring_holds_the_packets_at_the_outlet_until_the_consumer_takes() {
+    let (a, b) = pair("full-a", "full-b");
+    let key = "test/full-ring";
+    let (open, gate) = crossbeam_channel::bounded::<()>(0);
+    let input = coolbot::port::UfifoIn::<Pose>::new(64, None);
+    let mut consumer = System::new();
+    consumer
+        .add(
+            b.inlet::<Pose>("inlet", key, OutputKind::Data)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    consumer
+        .add(Component::new(
+            "held",
+            Box::new(Held { gate }),
+            coolbot::PortSet::new().input(&input),
+        ))
+        .unwrap();
+    consumer.connect("inlet.output", "held.input").unwrap();
+    consumer.run_all().unwrap();
+    // The outlet's input holds every packet the ring does not.
+    let (producer, out) = data_producer(
+        &a,
+        key,
+        InputKind::Fifo {
+            capacity: 8192,
+            policy: OverflowPolicy::Block,
+        },
+    );
+    wait_subscribed(&a, key);
+    // On the key (delivered without the held thread) until the ring is adopted.
+    let mut seq = 0;
+    assert!(
+        wait_until(PATIENCE, || {
+            out.send(pose(seq));
+            seq += 1;
+            a.shared_memory().ring_written > 0
+        }),
+        "the outlet never wrote into a ring"
+    );
+    const MORE: u64 = 5000;
+    for n in seq..seq + MORE {
+        out.send(pose(n));
+    }
+    let total = seq + MORE;
+    // Nothing is taken from the ring while the consumer is held: it fills, and the
+    // rest waits at the outlet.
+    let written = a.shared_memory().ring_written;
+    assert!(written < MORE, "{written} messages in a ring of 64 KiB");
+    open.send(()).expect("the consumer is held");
+    let mut received = Vec::new();
+    let deadline = std::time::Instant::now() + PATIENCE;
+    while (received.len() as u64) < total && std::time::Instant::now() < deadline {
+        match input.recv() {
+            Some(packet) => received.push(packet.seq),
+            None => std::thread::sleep(Duration::from_millis(1)),
+        }
+    }
+    assert_eq!(received, (0..total).collect::<Vec<_>>());
+    let outlet = producer.handle("outlet").unwrap().snapshot();
+    assert_eq!(outlet.overflows, 0, "{outlet:?}");
+    let inlet = consumer.handle("inlet").unwrap().snapshot();
+    assert_eq!(inlet.overflows, 0, "{inlet:?}");
+    assert!(a.shared_memory().ring_written >= MORE);
+    assert!(producer.shutdown().clean());
+    assert!(consumer.shutdown().clean());
 }

@@ -1,0 +1,25 @@
+//! How a bridge key's messages reach what delivers them: the one signature shared by
+//! inlets, proxies' outputs and rings (`crate::bridge`, `crate::place`,
+//! `crate::nearby`).
+
+use std::sync::Arc;
+
+use zenoh::bytes::ZBytes;
+
+/// What delivers one message of a bridge key, and how it came: it takes the payload
+/// as Zenoh holds it, and checks its length before copying or decoding it.
+pub(crate) type DeliverFn = Arc<dyn Fn(&ZBytes, Via) + Send + Sync>;
+
+/// How a message reached an inlet: on the key's stream (numbered, counted by the
+/// ledger), or as the answer to a query (the current value of a `last` or poster
+/// outlet, or a pull), which the ledger does not count.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Via {
+    /// The key's numbered stream, or a ring of the same messages (`crate::nearby`).
+    Stream,
+    /// The current value of a `last` or poster outlet, on Zenoh's receiving thread.
+    Answer,
+    /// The answer to a pull request, on the inlet's (or proxy's) own thread while it
+    /// answers the request: sent to the requesting input alone, at once.
+    Pull,
+}

@@ -1,0 +1,723 @@
+//! The same-host path of a queue bridge (`docs/distribution.md`, "Same host: a
+//! ring"): when a fifo or ufifo outlet and its inlet are in two processes of one
+//! host (or one process), the outlet writes its numbered messages into a
+//! [`coolbot::ring::Ring`] the inlet made, and rings the consumer's doorbell
+//! ([`coolbot::RemoteBell`]); the consumer's own thread takes them (a
+//! [`coolbot::Source`]) and hands each to the inlet's delivery, as if it had come on
+//! the key: the same numbering, ledger, losses and backlog. No TCP, no Zenoh thread,
+//! and, for a fifo, no wake-up of the outlet's thread: a packet the outlet's input
+//! takes on the producer's thread ([`coolbot::port::Intake`]) is in the consumer's
+//! input after one futex wake.
+//!
+//! **How the path is found.** The outlet asks `K/@ring` (a query carrying its host's
+//! boot id, its epoch, the number it has sent, and its own doorbell); an inlet on the
+//! same host makes a ring, adds the source to its consumer's bell and answers with
+//! both addresses. The answer comes on a Zenoh thread and is adopted by whichever of
+//! the outlet's paths sends next; until then, and whenever the ring is not usable,
+//! messages go on the key as before.
+//!
+//! **Order.** Messages sent on the key after the question may still be on their way
+//! when the first goes into the ring: the consumer takes a ring message only once the
+//! stream has brought the one before it (or a second has passed: a link that broke
+//! lost it, and the ledger counts it). A message longer than a quarter of the ring
+//! sends the stream back to the key for good, once the consumer has taken everything
+//! in the ring. When the ring is full, the outlet leaves the packets at its input
+//! (whose overflow policy applies, as for a slow consumer in one process) and asks
+//! the consumer to ring it when it has taken.
+//!
+//! **Ends.** A consumer whose process ended, or whose inlet dropped the ring, is seen
+//! by the outlet on its next write: the stream goes back to the key (the messages
+//! left in the ring are lost, and counted as a gone inlet's are: `crate::ledger`), and
+//! the outlet asks again later. A producer that ends leaves the consumer its ring,
+//! replaced when that outlet asks again, and bounded in number per inlet.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, OnceLock, PoisonError, Weak};
+use std::time::{Duration, Instant};
+
+use coolbot::port::{FifoIn, Intake, UfifoIn};
+use coolbot::ring::{Ring, RingAddress, RingWriter, WriteError};
+use coolbot::{BellAddress, ConsumerBell, Packet, RemoteBell, Source, SourceGuard};
+use serde::{Deserialize, Serialize};
+use zenoh::Wait;
+use zenoh::bytes::ZBytes;
+
+use crate::Error;
+use crate::delivery::{DeliverFn, Via};
+use crate::ledger::{self, InletLedger, Sent};
+use crate::tally::Tally;
+
+/// The bytes of messages in one ring: 64 KiB (messages up to 16 KiB).
+const RING_BYTES: usize = 64 << 10;
+
+/// How long after a refusal, or the loss of a ring, an outlet asks again; doubled
+/// at each unanswered question, up to [`LONGEST_WAIT`].
+const FIRST_WAIT: Duration = Duration::from_millis(100);
+const LONGEST_WAIT: Duration = Duration::from_secs(10);
+
+/// How long a question waits for its answer.
+const ASK_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// How long a consumer holds a ring message whose predecessor the stream has not
+/// brought: a message sent on the key just before the ring was adopted is on its
+/// way; longer, the link lost it.
+const GATE_PATIENCE: Duration = Duration::from_secs(1);
+
+/// The most rings an inlet keeps (one per outlet on its host; a queue connection
+/// has N producers).
+const MAX_RINGS: usize = 16;
+
+/// The key an inlet answers an outlet's question on.
+pub(crate) fn ask_key(key: &str) -> String {
+    format!("{key}/@ring")
+}
+
+/// This host's identity: its boot id (two processes with the same one share the
+/// host's memory, if each may read the other's `/proc`).
+fn host() -> Option<&'static str> {
+    static HOST: OnceLock<Option<String>> = OnceLock::new();
+    HOST.get_or_init(|| {
+        std::fs::read_to_string("/proc/sys/kernel/random/boot_id")
+            .ok()
+            .map(|id| id.trim().to_owned())
+    })
+    .as_deref()
+}
+
+/// A doorbell's address on the wire.
+type BellAt = (u32, i32, u64, u32);
+/// A ring's address on the wire.
+type RingAt = (u32, i32, u64, u64);
+
+fn bell_at(a: BellAddress) -> BellAt {
+    (a.pid, a.fd, a.nonce, a.pair)
+}
+
+fn bell_address((pid, fd, nonce, pair): BellAt) -> BellAddress {
+    BellAddress {
+        pid,
+        fd,
+        nonce,
+        pair,
+    }
+}
+
+/// An outlet's question.
+#[derive(Serialize, Deserialize)]
+struct Ask {
+    host: String,
+    epoch: u64,
+    /// The number the outlet had sent on the key when it asked.
+    sent: u64,
+    /// The outlet's own doorbell (rung when it waits for room).
+    bell: Option<BellAt>,
+    /// The outlet (`node/name`): a second question of the same outlet replaces its
+    /// ring.
+    outlet: String,
+}
+
+/// An inlet's answer.
+#[derive(Serialize, Deserialize)]
+enum Answer {
+    Ring {
+        ring: RingAt,
+        bell: BellAt,
+    },
+    /// Not on this host, or it cannot take a ring now (the reason).
+    No(String),
+}
+
+/// The packets waiting at an outlet's input.
+pub(crate) trait Queue<T>: Send + Sync {
+    fn next(&self) -> Option<T>;
+    fn is_empty(&self) -> bool;
+    /// The doorbell of the outlet (once it is in a system).
+    fn bell(&self) -> Option<ConsumerBell>;
+}
+
+impl<T: Packet> Queue<T> for FifoIn<T> {
+    fn next(&self) -> Option<T> {
+        self.recv()
+    }
+    fn is_empty(&self) -> bool {
+        FifoIn::is_empty(self)
+    }
+    fn bell(&self) -> Option<ConsumerBell> {
+        self.owner_bell()
+    }
+}
+
+impl<T: Packet> Queue<T> for UfifoIn<T> {
+    fn next(&self) -> Option<T> {
+        self.recv()
+    }
+    fn is_empty(&self) -> bool {
+        UfifoIn::is_empty(self)
+    }
+    fn bell(&self) -> Option<ConsumerBell> {
+        self.owner_bell()
+    }
+}
+
+/// Sends one packet on the key as the next numbered message (`crate::bridge`).
+pub(crate) type Link<T> = Box<dyn Fn(&T) + Send + Sync>;
+
+/// A ring an inlet gave: where to write, and whom to ring.
+struct OnRing {
+    writer: RingWriter,
+    consumer: RemoteBell,
+}
+
+/// What an outlet's paths share, under one lock (their order).
+struct Path<T> {
+    ring: Option<OnRing>,
+    /// A packet taken from the input that found the ring full (or a long one that
+    /// waits for the ring to empty): sent before any other.
+    pending: Option<T>,
+    /// A message too long for the ring was sent on the key: the key for good.
+    key_only: bool,
+    /// When to ask again, and the wait after that.
+    next_ask: Instant,
+    wait: Duration,
+    /// The source on the outlet's own bell (its thread forwards when the consumer
+    /// rings it), and that bell's address; made on the first forward.
+    own: Option<(SourceGuard, Option<BellAddress>)>,
+    /// The message buffer.
+    buffer: Vec<u8>,
+}
+
+/// An outlet's same-host path: see the module documentation.
+pub(crate) struct Nearby<T, Q> {
+    session: zenoh::Session,
+    key: String,
+    outlet: String,
+    epoch: u64,
+    sent: Arc<Sent>,
+    tally: Option<Arc<Tally>>,
+    queue: Q,
+    link: Link<T>,
+    counters: Arc<crate::shm::Counters>,
+    path: Mutex<Path<T>>,
+    /// An answer's ring, opened on Zenoh's thread, adopted by the next send.
+    offered: Arc<Mutex<Option<OnRing>>>,
+    asking: Arc<AtomicBool>,
+}
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// What became of a packet offered to the ring.
+enum Sent1<T> {
+    Done,
+    /// Not now: kept, the outlet waits to be rung.
+    Wait(T),
+    /// Not by the ring: on the key.
+    Key(T),
+}
+
+impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
+    #[allow(clippy::too_many_arguments, reason = "the outlet's parts, once")]
+    pub(crate) fn new(
+        session: &zenoh::Session,
+        key: &str,
+        outlet: String,
+        epoch: u64,
+        sent: Arc<Sent>,
+        tally: Option<Arc<Tally>>,
+        queue: Q,
+        link: Link<T>,
+        counters: Arc<crate::shm::Counters>,
+    ) -> Arc<Nearby<T, Q>> {
+        Arc::new(Nearby {
+            session: session.clone(),
+            key: key.to_owned(),
+            outlet,
+            epoch,
+            sent,
+            tally,
+            queue,
+            link,
+            counters,
+            path: Mutex::new(Path {
+                ring: None,
+                pending: None,
+                key_only: false,
+                next_ask: Instant::now(),
+                wait: FIRST_WAIT,
+                own: None,
+                buffer: Vec::new(),
+            }),
+            offered: Arc::default(),
+            asking: Arc::default(),
+        })
+    }
+
+    /// Take a ring an answer brought.
+    fn adopt(&self, path: &mut Path<T>) {
+        if path.ring.is_none()
+            && !path.key_only
+            && let Some(ring) = lock(&self.offered).take()
+        {
+            path.ring = Some(ring);
+            path.wait = FIRST_WAIT;
+            tracing::debug!(key = %self.key, "outlet writes into a ring of its consumer's process");
+        }
+    }
+
+    /// Write `packet` as the next numbered message into `ring`.
+    fn write(&self, ring: &mut OnRing, buffer: &mut Vec<u8>, packet: &T) -> Result<(), WriteError> {
+        let next = self.sent.get() + 1;
+        buffer.clear();
+        match postcard::to_extend(&(self.epoch, next, packet), std::mem::take(buffer)) {
+            Ok(encoded) => *buffer = encoded,
+            Err(error) => {
+                // Not this path's to count: the key's path encodes it again, and
+                // counts it.
+                tracing::trace!(key = %self.key, "ring message does not encode: {error}");
+                return Err(WriteError::TooLong);
+            }
+        }
+        // Tallied before the consumer can have it, as on the key.
+        if let Some(tally) = &self.tally {
+            tally.record(next);
+        }
+        match ring.writer.write(buffer) {
+            Ok(()) => {
+                self.sent.set(next);
+                ring.consumer.ring();
+                self.counters.ring_written();
+                tracing::trace!(target: ledger::LEDGER_TARGET, "{} sent {} {next}", self.key, self.epoch);
+                Ok(())
+            }
+            Err(error) => {
+                if let Some(tally) = &self.tally {
+                    tally.record(next - 1);
+                }
+                Err(error)
+            }
+        }
+    }
+
+    /// Offer `packet` to the ring (the outlet's thread).
+    fn send_one(&self, path: &mut Path<T>, packet: T) -> Sent1<T> {
+        let Path {
+            ring,
+            buffer,
+            key_only,
+            ..
+        } = path;
+        let Some(on) = ring.as_mut() else {
+            return Sent1::Key(packet);
+        };
+        match self.write(on, buffer, &packet) {
+            Ok(()) => Sent1::Done,
+            Err(WriteError::Full) => {
+                if on.writer.is_gone() {
+                    self.lost_ring(path);
+                    return Sent1::Key(packet);
+                }
+                on.writer.ask_to_be_rung();
+                // Room made before the request was seen: try once more.
+                match self.write(on, buffer, &packet) {
+                    Ok(()) => Sent1::Done,
+                    Err(_) => Sent1::Wait(packet),
+                }
+            }
+            Err(WriteError::TooLong) => {
+                if on.writer.is_empty() {
+                    *key_only = true;
+                    *ring = None;
+                    tracing::debug!(key = %self.key, "a message too long for the ring: the outlet sends on the key from now on");
+                    return Sent1::Key(packet);
+                }
+                on.writer.ask_to_be_rung();
+                if on.writer.is_empty() {
+                    *key_only = true;
+                    *ring = None;
+                    return Sent1::Key(packet);
+                }
+                Sent1::Wait(packet)
+            }
+            Err(WriteError::Gone) => {
+                self.lost_ring(path);
+                Sent1::Key(packet)
+            }
+        }
+    }
+
+    fn lost_ring(&self, path: &mut Path<T>) {
+        path.ring = None;
+        path.next_ask = Instant::now() + path.wait;
+        tracing::debug!(key = %self.key, "the consumer's ring is gone: the outlet sends on the key");
+    }
+
+    /// Send what waits at the input (the outlet's thread: its section, or its
+    /// doorbell rung by the consumer).
+    pub(crate) fn forward(self: &Arc<Self>) {
+        let mut path = lock(&self.path);
+        if path.own.is_none()
+            && let Some(bell) = self.queue.bell()
+        {
+            let source: Arc<dyn Source> = Arc::new(OwnBell {
+                nearby: Arc::downgrade(self),
+            });
+            let address = bell.address();
+            path.own = Some((bell.add_source(source), address));
+        }
+        self.adopt(&mut path);
+        if path.ring.is_none() && !path.key_only {
+            self.ask(&mut path);
+        }
+        loop {
+            let Some(packet) = path.pending.take().or_else(|| self.queue.next()) else {
+                return;
+            };
+            match self.send_one(&mut path, packet) {
+                Sent1::Done => {}
+                Sent1::Wait(packet) => {
+                    path.pending = Some(packet);
+                    return;
+                }
+                Sent1::Key(packet) => (self.link)(&packet),
+            }
+        }
+    }
+
+    /// Ask the key's inlets for a ring, if it is time (the answer comes later).
+    fn ask(&self, path: &mut Path<T>) {
+        let now = Instant::now();
+        if now < path.next_ask || self.asking.load(Ordering::Acquire) {
+            return;
+        }
+        let Some(host) = host() else {
+            path.key_only = true;
+            return;
+        };
+        path.next_ask = now + path.wait;
+        path.wait = (path.wait * 2).min(LONGEST_WAIT);
+        let ask = Ask {
+            host: host.to_owned(),
+            epoch: self.epoch,
+            sent: self.sent.get(),
+            bell: path.own.as_ref().and_then(|(_, at)| *at).map(bell_at),
+            outlet: self.outlet.clone(),
+        };
+        let Ok(payload) = postcard::to_allocvec(&ask) else {
+            return;
+        };
+        let offered = Arc::clone(&self.offered);
+        self.asking.store(true, Ordering::Release);
+        let done = Asking(Arc::clone(&self.asking));
+        let key = self.key.clone();
+        let asked = self
+            .session
+            .get(ask_key(&self.key))
+            .payload(payload)
+            .timeout(ASK_TIMEOUT)
+            .callback(move |reply| {
+                let _asking = &done;
+                let Ok(sample) = reply.result() else {
+                    return;
+                };
+                let bytes = sample.payload().to_bytes();
+                let answer = match crate::codec::decode::<Answer>(&bytes, 256) {
+                    Ok(answer) => answer,
+                    Err(error) => {
+                        tracing::debug!(%key, "a ring answer that does not decode: {error}");
+                        return;
+                    }
+                };
+                match answer {
+                    Answer::Ring { ring, bell } => {
+                        let (pid, fd, nonce, capacity) = ring;
+                        let opened = RingWriter::open(&RingAddress {
+                            pid,
+                            fd,
+                            nonce,
+                            capacity,
+                        })
+                        .and_then(|writer| {
+                            Ok(OnRing {
+                                writer,
+                                consumer: RemoteBell::open(&bell_address(bell))?,
+                            })
+                        });
+                        match opened {
+                            Ok(ring) => *lock(&offered) = Some(ring),
+                            Err(error) => {
+                                tracing::debug!(%key, "the consumer's ring does not open: {error}");
+                            }
+                        }
+                    }
+                    Answer::No(reason) => tracing::debug!(%key, "no ring: {reason}"),
+                }
+            })
+            .wait();
+        if let Err(error) = asked {
+            tracing::debug!(key = %self.key, "ring question not sent: {error}");
+        }
+    }
+}
+
+/// Clears an outlet's `asking` when its question's callback is dropped: the query
+/// ended (answered, timed out, or not sent).
+struct Asking(Arc<AtomicBool>);
+
+impl Drop for Asking {
+    fn drop(&mut self) {
+        self.0.store(false, Ordering::Release);
+    }
+}
+
+/// What a fifo outlet's input offers its packets to: its path, held weakly (the
+/// path holds the input).
+pub(crate) struct Inline<T, Q>(pub(crate) Weak<Nearby<T, Q>>);
+
+impl<T: Packet + Serialize, Q: Queue<T> + 'static> Intake<T> for Inline<T, Q> {
+    fn offer(&self, packet: &T) -> bool {
+        self.0.upgrade().is_some_and(|nearby| nearby.offer(packet))
+    }
+}
+
+impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
+    /// Write `packet` into the ring now, on the producer's thread, if nothing waits
+    /// before it and the ring takes it.
+    fn offer(&self, packet: &T) -> bool {
+        let Ok(mut path) = self.path.try_lock() else {
+            return false;
+        };
+        self.adopt(&mut path);
+        if path.pending.is_some() || !self.queue.is_empty() {
+            return false;
+        }
+        let Path { ring, buffer, .. } = &mut *path;
+        let Some(on) = ring.as_mut() else {
+            return false;
+        };
+        self.write(on, buffer, packet).is_ok()
+    }
+}
+
+/// The source on an outlet's own bell: its thread forwards when rung (by the
+/// consumer that made room).
+struct OwnBell<T, Q> {
+    nearby: Weak<Nearby<T, Q>>,
+}
+
+impl<T: Packet + Serialize, Q: Queue<T> + 'static> Source for OwnBell<T, Q> {
+    fn ready(&self) -> bool {
+        self.nearby.upgrade().is_some_and(|nearby| {
+            nearby
+                .path
+                .try_lock()
+                .is_ok_and(|path| path.pending.is_some() && path.ring.is_some())
+        })
+    }
+
+    fn drain(&self) {
+        if let Some(nearby) = self.nearby.upgrade() {
+            nearby.forward();
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// The inlet's side.
+
+/// An inlet's rings: made when an outlet of its host asks, drained by its consumer's
+/// thread.
+pub(crate) struct InletRings {
+    key: String,
+    deliver: DeliverFn,
+    ledger: Arc<InletLedger>,
+    /// The consumer's doorbell (the one component the inlet's output feeds).
+    consumer: Box<dyn Fn() -> Option<ConsumerBell> + Send + Sync>,
+    /// Where a ring that breaks its layout is counted (the inlet's `network` input).
+    lost: coolbot::port::ErasedInput,
+    counters: Arc<crate::shm::Counters>,
+    rings: Mutex<Vec<(String, SourceGuard)>>,
+}
+
+impl InletRings {
+    pub(crate) fn new(
+        key: &str,
+        deliver: DeliverFn,
+        ledger: Arc<InletLedger>,
+        consumer: Box<dyn Fn() -> Option<ConsumerBell> + Send + Sync>,
+        lost: coolbot::port::ErasedInput,
+        counters: Arc<crate::shm::Counters>,
+    ) -> Arc<InletRings> {
+        Arc::new(InletRings {
+            key: key.to_owned(),
+            deliver,
+            ledger,
+            consumer,
+            lost,
+            counters,
+            rings: Mutex::new(Vec::new()),
+        })
+    }
+
+    /// Drop every ring (the inlet stopped): their outlets go back to the key.
+    pub(crate) fn close(&self) {
+        let rings = std::mem::take(&mut *lock(&self.rings));
+        drop(rings);
+    }
+
+    /// Answer the outlets' questions on `K/@ring` (until the queryable is dropped).
+    pub(crate) fn serve(
+        self: &Arc<Self>,
+        session: &zenoh::Session,
+    ) -> Result<zenoh::query::Queryable<()>, Error> {
+        let rings = Arc::downgrade(self);
+        session
+            .declare_queryable(ask_key(&self.key))
+            .callback(move |query| {
+                let Some(rings) = rings.upgrade() else {
+                    return;
+                };
+                let Some(payload) = query.payload() else {
+                    return;
+                };
+                let Ok(ask) = crate::codec::decode::<Ask>(&payload.to_bytes(), 1024) else {
+                    return;
+                };
+                let answer = match rings.answer(ask) {
+                    Ok((ring, bell)) => Answer::Ring {
+                        ring: (ring.pid, ring.fd, ring.nonce, ring.capacity),
+                        bell: bell_at(bell),
+                    },
+                    Err(reason) => Answer::No(reason),
+                };
+                if let Ok(bytes) = postcard::to_allocvec(&answer) {
+                    let _ = query.reply(query.key_expr().clone(), bytes).wait();
+                }
+            })
+            .wait()
+            .map_err(Error::zenoh("declare the inlet's ring queryable"))
+    }
+
+    fn answer(&self, ask: Ask) -> Result<(RingAddress, BellAddress), String> {
+        if host() != Some(ask.host.as_str()) {
+            return Err("another host".to_owned());
+        }
+        let consumer = (self.consumer)()
+            .ok_or("the inlet's output does not feed one input directly (no consumer to ring)")?;
+        let bell = consumer
+            .address()
+            .ok_or("the consumer's doorbell is not in shared memory")?;
+        let ring = Ring::new(RING_BYTES).map_err(|error| format!("no ring: {error}"))?;
+        let address = ring.address().ok_or("the ring has no address")?;
+        let writer = match ask.bell.map(bell_address) {
+            Some(at) => Some(RemoteBell::open(&at).map_err(|e| format!("the outlet's bell: {e}"))?),
+            None => None,
+        };
+        let source = Arc::new(RingSource {
+            ring: Mutex::new(ring),
+            deliver: Arc::clone(&self.deliver),
+            ledger: Arc::clone(&self.ledger),
+            writer,
+            gate: Mutex::new(Gate::Closed {
+                asked_at: ask.sent,
+                since: None,
+            }),
+            lost: self.lost.clone(),
+            counters: Arc::clone(&self.counters),
+            key: self.key.clone(),
+            broken: AtomicBool::new(false),
+        });
+        let guard = consumer.add_source(source);
+        let mut rings = lock(&self.rings);
+        rings.retain(|(outlet, _)| *outlet != ask.outlet);
+        if rings.len() >= MAX_RINGS {
+            rings.remove(0);
+        }
+        rings.push((ask.outlet, guard));
+        Ok((address, bell))
+    }
+}
+
+/// Whether a ring's first messages may be taken yet.
+enum Gate {
+    /// Not until the stream brought the message before the ring's first: the
+    /// outlet's number when it asked (messages up to it came before the question on
+    /// the key), and when the first message was held.
+    Closed {
+        asked_at: u64,
+        since: Option<Instant>,
+    },
+    Open,
+}
+
+/// One outlet's ring, drained by the consumer's thread.
+struct RingSource {
+    ring: Mutex<Ring>,
+    deliver: DeliverFn,
+    ledger: Arc<InletLedger>,
+    /// The outlet's bell, rung when it waits for room.
+    writer: Option<RemoteBell>,
+    gate: Mutex<Gate>,
+    lost: coolbot::port::ErasedInput,
+    counters: Arc<crate::shm::Counters>,
+    key: String,
+    broken: AtomicBool,
+}
+
+impl RingSource {
+    /// Whether the message `bytes` (numbered) may be delivered now.
+    fn may_pass(&self, gate: &mut Gate, bytes: &[u8]) -> bool {
+        let Gate::Closed { asked_at, since } = gate else {
+            return true;
+        };
+        let Ok(((epoch, seq), _)) = postcard::take_from_bytes::<(u64, u64)>(bytes) else {
+            // Not numbered: delivered, and the delivery counts it lost.
+            *gate = Gate::Open;
+            return true;
+        };
+        let before = seq.saturating_sub(1);
+        let waited = since.is_some_and(|since| since.elapsed() >= GATE_PATIENCE);
+        if before <= *asked_at || self.ledger.newest(epoch).is_some_and(|n| n >= before) || waited {
+            *gate = Gate::Open;
+            return true;
+        }
+        since.get_or_insert_with(Instant::now);
+        false
+    }
+}
+
+impl Source for RingSource {
+    fn ready(&self) -> bool {
+        !self.broken.load(Ordering::Relaxed) && self.ring.try_lock().is_ok_and(|r| r.has_messages())
+    }
+
+    fn drain(&self) {
+        if self.broken.load(Ordering::Relaxed) {
+            return;
+        }
+        let mut ring = lock(&self.ring);
+        let mut gate = lock(&self.gate);
+        let taken = ring.take(|bytes| {
+            if !self.may_pass(&mut gate, bytes) {
+                return false;
+            }
+            (self.deliver)(&ZBytes::from(bytes.to_vec()), Via::Stream);
+            true
+        });
+        match taken {
+            Ok(taken) => {
+                self.counters.ring_taken(taken.messages);
+                if taken.writer_waits
+                    && let Some(writer) = &self.writer
+                {
+                    writer.ring();
+                }
+            }
+            Err(error) => {
+                self.broken.store(true, Ordering::Relaxed);
+                self.lost.count_loss(1);
+                tracing::warn!(key = %self.key, "inlet lost what was left in a ring: {error}");
+            }
+        }
+    }
+}
