@@ -57,15 +57,24 @@ impl Mapping {
     pub(crate) fn open(pid: u32, fd: i32, bytes: usize) -> std::io::Result<Mapping> {
         #[cfg(target_os = "linux")]
         {
+            use std::os::unix::fs::OpenOptionsExt;
             let path = format!("/proc/{pid}/fd/{fd}");
+            // Never blocks nor takes a terminal, whatever the descriptor turns out to
+            // be (a number from another process).
             let file = std::fs::OpenOptions::new()
                 .read(true)
                 .write(true)
+                .custom_flags(
+                    (rustix::fs::OFlags::NONBLOCK | rustix::fs::OFlags::NOCTTY).bits() as i32,
+                )
                 .open(&path)?;
-            let size = file.metadata()?.len();
+            // Sealed against shrinking before its size is read: the size then holds
+            // for as long as it is mapped.
             let sealed = rustix::fs::fcntl_get_seals(&file)
                 .is_ok_and(|seals| seals.contains(rustix::fs::SealFlags::SHRINK));
-            if size != bytes as u64 || !sealed {
+            let metadata = file.metadata()?;
+            let size = metadata.len();
+            if !sealed || !metadata.is_file() || size != bytes as u64 {
                 return Err(std::io::Error::new(
                     std::io::ErrorKind::InvalidData,
                     format!("{path} is not the shared memory it was said to be ({size} bytes)"),

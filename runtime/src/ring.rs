@@ -228,9 +228,16 @@ impl Ring {
     }
 }
 
+impl Ring {
+    /// Close it: the writer sees it ([`RingWriter::is_closed`]) and writes no more.
+    pub fn close(&self) {
+        self.words()[CLOSED_AT].store(1, Ordering::SeqCst);
+    }
+}
+
 impl Drop for Ring {
     fn drop(&mut self) {
-        self.words()[CLOSED_AT].store(1, Ordering::SeqCst);
+        self.close();
     }
 }
 
@@ -292,7 +299,7 @@ impl RingWriter {
         }
         let capacity = self.capacity as u64;
         let words = self.shared.u64s();
-        if words[CLOSED_AT].load(Ordering::Relaxed) != 0 {
+        if self.is_closed() {
             return Err(WriteError::Gone);
         }
         let mut head = words[HEAD_AT].load(Ordering::Relaxed);
@@ -334,11 +341,19 @@ impl RingWriter {
     /// been made in between, by a take that did not see the request).
     pub fn ask_to_be_rung(&self) {
         self.shared.u64s()[WAITING_AT].store(1, Ordering::SeqCst);
+        // The request before any later look at the reader's position (a store then
+        // a load: only a full fence orders them).
+        std::sync::atomic::fence(Ordering::SeqCst);
     }
 
-    /// Whether the reader closed the ring or its process ended.
+    /// Whether the reader closed the ring (a look at one word).
+    pub fn is_closed(&self) -> bool {
+        self.shared.u64s()[CLOSED_AT].load(Ordering::Acquire) != 0
+    }
+
+    /// Whether the reader closed the ring or its process ended (a system call).
     pub fn is_gone(&self) -> bool {
-        if self.shared.u64s()[CLOSED_AT].load(Ordering::SeqCst) != 0 {
+        if self.is_closed() {
             return true;
         }
         #[cfg(target_os = "linux")]

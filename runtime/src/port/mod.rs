@@ -200,13 +200,13 @@ impl InputCore {
         })
     }
 
-    /// A packet or event was stored: count it, wake the component and any puller.
-    #[inline]
     /// The doorbell of the component this input is a port of, once it is in a system.
     pub(crate) fn bell(&self) -> Option<Arc<Doorbell>> {
         self.owner.get().map(|owner| Arc::clone(&owner.bell))
     }
 
+    /// A packet or event was stored: count it, wake the component and any puller.
+    #[inline]
     fn arrived(&self) {
         // (A last input's slot counts its own arrivals: `arrived_by`. Were this called
         // on its core, the bits below the count would still be left alone.)

@@ -44,7 +44,9 @@ use crate::backlog::{Backlog, LostFn};
 use crate::codec;
 use crate::delivery::{DeliverFn, Via};
 use crate::ledger::{self, InletLedger, OutletLedger};
-use crate::nearby::{InletRings, Inline, Nearby};
+use crate::nearby::{
+    self, Held, InletParts, InletRings, Inline, Link, Nearby, NewestFn, Queue, SameHost,
+};
 use crate::shm::Arena;
 use crate::tally::Tally;
 use crate::{Error, Node, keys};
@@ -433,14 +435,15 @@ type Numbered<T> = (u64, u64, T);
 pub(crate) struct Outlet<T> {
     spec: &'static Spec,
     input: OutletInput<T>,
+    /// A fifo or ufifo outlet's path to a consumer on this host (`crate::nearby`):
+    /// sends what waits at the input, by a ring or on the key. Dropped before the
+    /// ledger: nothing is sent after its last questions.
+    nearby: Option<Box<dyn SameHost>>,
     /// What the inlets acknowledge (numbered streams only: not a poster, not pull).
     /// Dropped first: its last questions go before the tally says the epoch stopped
     /// cleanly.
     _ledger: Option<OutletLedger>,
     wire: Arc<Wire>,
-    /// A fifo or ufifo outlet's path to a consumer on this host (`crate::nearby`):
-    /// sends what waits at the input, by a ring or on the key.
-    nearby: Option<Box<dyn Fn() + Send + Sync>>,
     pull: bool,
     epoch: u64,
     seq: Arc<AtomicU64>,
@@ -713,42 +716,16 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
         });
         let nearby = (nearby && pull.is_none() && node.same_host())
             .then(|| {
-                let link = {
-                    let (wire, sent) = (Arc::clone(&wire), Arc::clone(&sent));
-                    Box::new(move |packet: &T| wire.send_numbered(epoch, &sent, packet))
-                };
                 let outlet = format!("{}/{name}", node.name());
-                let (key, tally) = (&wire.key, wire.tally.clone());
-                let sent = Arc::clone(&sent);
                 match &input {
                     OutletInput::Fifo(port) => {
-                        let nearby = Nearby::new(
-                            session,
-                            key,
-                            outlet,
-                            epoch,
-                            sent,
-                            tally,
-                            port.clone(),
-                            link,
-                            node.shared_memory_counters(),
-                        );
-                        port.set_intake(Arc::new(Inline(Arc::downgrade(&nearby))));
-                        Some(Box::new(move || nearby.forward()) as Box<dyn Fn() + Send + Sync>)
+                        let path = same_host(node, &wire, &sent, epoch, outlet, port.clone());
+                        port.set_intake(Arc::new(Inline(Arc::downgrade(&path))));
+                        Some(Box::new(Held(path)) as Box<dyn SameHost>)
                     }
                     OutletInput::Ufifo(port) => {
-                        let nearby = Nearby::new(
-                            session,
-                            key,
-                            outlet,
-                            epoch,
-                            sent,
-                            tally,
-                            port.clone(),
-                            link,
-                            node.shared_memory_counters(),
-                        );
-                        Some(Box::new(move || nearby.forward()) as Box<dyn Fn() + Send + Sync>)
+                        let path = same_host(node, &wire, &sent, epoch, outlet, port.clone());
+                        Some(Box::new(Held(path)) as Box<dyn SameHost>)
                     }
                     _ => None,
                 }
@@ -757,9 +734,9 @@ impl<T: Packet + Serialize + DeserializeOwned> OutletBuilder<'_, T> {
         let outlet = Outlet {
             spec,
             input,
+            nearby,
             _ledger: ledger,
             wire,
-            nearby,
             pull: pull.is_some(),
             epoch,
             seq,
@@ -804,7 +781,7 @@ impl<T: Packet + Serialize> Outlet<T> {
             return;
         }
         if let Some(nearby) = &self.nearby {
-            nearby();
+            nearby.forward();
             return;
         }
         let wire = &self.wire;
@@ -869,9 +846,50 @@ impl<T: Packet + Serialize> Outlet<T> {
     }
 }
 
+/// The same-host path of an outlet whose input is `queue` (`crate::nearby`): it
+/// numbers with the outlet's count, and sends on the key through `wire`.
+fn same_host<T: Packet + Serialize, Q: Queue<T> + 'static>(
+    node: &Node,
+    wire: &Arc<Wire>,
+    sent: &Arc<ledger::Sent>,
+    epoch: u64,
+    outlet: String,
+    queue: Q,
+) -> Arc<Nearby<T, Q>> {
+    let link: Link<T> = {
+        let (wire, sent) = (Arc::clone(wire), Arc::clone(sent));
+        Box::new(move |packet: &T| wire.send_numbered(epoch, &sent, packet))
+    };
+    Nearby::new(nearby::Parts {
+        session: node.session().clone(),
+        key: wire.key.clone(),
+        outlet,
+        epoch,
+        sent: Arc::clone(sent),
+        tally: wire.tally.clone(),
+        queue,
+        link,
+        losses: wire.losses.clone(),
+        counters: node.shared_memory_counters(),
+    })
+}
+
 impl<T: Packet + Serialize> Automaton for Outlet<T> {
     fn spec(&self) -> &'static Spec {
         self.spec
+    }
+
+    fn start(&mut self, _cx: &mut Context) -> Result<(), Fault> {
+        if let Some(nearby) = &self.nearby {
+            nearby.set_running(true);
+        }
+        Ok(())
+    }
+
+    fn stop(&mut self, _cx: &mut Context) {
+        if let Some(nearby) = &self.nearby {
+            nearby.set_running(false);
+        }
     }
 
     fn section(&mut self, _state: usize, section: Section, _cx: &mut Context) -> Result<(), Fault> {
@@ -960,6 +978,14 @@ struct Delivered {
 }
 
 impl Delivered {
+    /// The newest number of `epoch` the stream brought.
+    fn stream(&self, epoch: u64) -> Option<u64> {
+        self.epochs
+            .iter()
+            .find(|(e, _, _)| *e == epoch)
+            .map(|(_, stream, _)| *stream)
+    }
+
     /// Whether message `seq` of `epoch`, come `via`, is to be delivered (and is now
     /// taken as delivered). An answer is dropped when the stream, or another
     /// answer, delivered that number or a newer one of its epoch; the stream's
@@ -984,6 +1010,12 @@ impl Delivered {
         };
         let (_, stream, answered) = &mut self.epochs[at];
         match via {
+            // Older than the stream's newest, and not far: a message of the key that
+            // came after a ring's (its wait was over, `crate::nearby`), which the
+            // ledger counted missing then. Dropped: the consumer never gets a packet
+            // after a newer one. (Further behind, a number made up by a peer: as for
+            // answers, it holds back at most [`ANSWER_AHEAD`] of the stream.)
+            Via::Stream if seq <= *stream && *stream - seq <= ANSWER_AHEAD => false,
             Via::Stream => {
                 *stream = (*stream).max(seq);
                 match *answered {
@@ -1041,14 +1073,15 @@ struct Counters {
 /// What delivers a bridge key's messages on `output` (strict decoding of payloads of
 /// at most `max_payload` bytes, longer ones refused before they are copied, lent
 /// when in shared memory and counted in `shared`; the ledger's count of numbers,
-/// losses counted at `counters`), and that ledger.
+/// losses counted at `counters`), that ledger, and the newest number of each epoch
+/// it handed on from the stream (a data output's).
 fn deliverer<T: Packet + DeserializeOwned>(
     output: InletOutput<T>,
     counters: Counters,
     shared: Arc<crate::shm::Counters>,
     key: String,
     max_payload: usize,
-) -> (DeliverFn, Arc<InletLedger>) {
+) -> (DeliverFn, Arc<InletLedger>, NewestFn) {
     let network = Arc::new(counters.network);
     let counted = Arc::clone(&network);
     let lost_key = key.clone();
@@ -1073,6 +1106,13 @@ fn deliverer<T: Packet + DeserializeOwned>(
         key.clone(),
     ));
     let gaps = Arc::clone(&ledger);
+    // What a data inlet delivered, per outlet epoch; read by its rings' gates
+    // (`crate::nearby`) under the lock its deliveries hold while they send.
+    let delivered = Arc::new(Mutex::new(Delivered::default()));
+    let newest: NewestFn = {
+        let delivered = Arc::clone(&delivered);
+        Arc::new(move |epoch| lock(&delivered).stream(epoch))
+    };
     let deliver: DeliverFn = match output {
         InletOutput::Tick(port) => Arc::new(move |payload, via| {
             let taken = shared.received(payload, MAX_TICK_MESSAGE, |bytes| {
@@ -1096,7 +1136,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
             }
         }),
         InletOutput::Data(port) => {
-            let delivered = Mutex::new(Delivered::default());
+            let delivered = Arc::clone(&delivered);
             // Packets whose delivery would wait go through a backlog: the receiving
             // thread never waits on a full `block` fifo.
             let backlog = Backlog::new(port, &key, lost_many);
@@ -1157,7 +1197,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
             })
         }
     };
-    (deliver, ledger)
+    (deliver, ledger, newest)
 }
 
 /// A proxy's output (`crate::place`): `ports` with a typed output of `kind` added,
@@ -1191,7 +1231,7 @@ pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
         network: losses.clone(),
         resets: losses,
     };
-    let (deliver, ledger) = deliverer(
+    let (deliver, ledger, _) = deliverer(
         output,
         counters,
         node.shared_memory_counters(),
@@ -1329,7 +1369,7 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             }
             _ => None,
         };
-        let (deliver, ledger) = deliverer(
+        let (deliver, ledger, newest) = deliverer(
             output,
             counters,
             node.shared_memory_counters(),
@@ -1337,21 +1377,31 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             max_payload,
         );
         let rings = consumer.map(|consumer| {
-            InletRings::new(
-                &key,
-                Arc::clone(&deliver),
-                Arc::clone(&ledger),
+            InletRings::new(InletParts {
+                key: key.clone(),
+                answers_on: format!("{key}/@ring/{}/{name}", node.name()),
+                deliver: Arc::clone(&deliver),
+                newest,
                 consumer,
-                network.erased(),
-                node.shared_memory_counters(),
-            )
+                lost: network.erased(),
+                counters: node.shared_memory_counters(),
+            })
         });
         let acks = match pull {
             Some(_) => None,
-            None => Some(
-                ledger::serve(node, &key, &name, ledger, || {})
+            None => {
+                // An outlet asks when its inlet is behind: a ring held for the key's
+                // message is looked at again then.
+                let rings = rings.clone();
+                Some(
+                    ledger::serve(node, &key, &name, ledger, move |_| {
+                        if let Some(rings) = &rings {
+                            rings.nudge();
+                        }
+                    })
                     .map_err(Error::zenoh("serve the inlet's acknowledgments"))?,
-            ),
+                )
+            }
         };
         let inlet = Inlet {
             spec,
@@ -1500,7 +1550,7 @@ mod tests {
         let network = TickIn::new();
         let resets = TickIn::new();
         let out = DataOut::<Vec<u8>>::new();
-        let (deliver, _ledger) = deliverer(
+        let (deliver, _ledger, _) = deliverer(
             InletOutput::Data(out),
             Counters {
                 network: network.erased(),

@@ -26,7 +26,8 @@
 //!   (outlets) and `K/@in/<node>/<name>/<process>` (inlets; the process is drawn
 //!   once per process, `crate::ledger::process`), and the inlets' acknowledgments as
 //!   queries on
-//!   `K/@ack/<node>/<name>` (`crate::ledger`).
+//!   `K/@ack/<node>/<name>` (`crate::ledger`); the queryable on which an inlet makes
+//!   a ring for an outlet of its host, `K/@ring/<node>/<name>` (`crate::nearby`).
 
 use crate::{Error, limits};
 

@@ -247,14 +247,6 @@ impl InletLedger {
         }
     }
 
-    /// The newest number of outlet `epoch` received, if any was.
-    pub(crate) fn newest(&self, epoch: u64) -> Option<u64> {
-        lock(&self.epochs)
-            .iter()
-            .find(|e| e.had.epoch == epoch)
-            .map(|e| e.had.newest)
-    }
-
     /// Message `seq` of outlet `epoch` arrived (0: a pull answer, not numbered).
     pub(crate) fn received(&self, epoch: u64, seq: u64) {
         if seq == 0 {
@@ -400,14 +392,14 @@ impl InletLedger {
 }
 
 /// The queryable through which an inlet acknowledges: `K/@ack/<node>/<name>`;
-/// `counted` runs after a question's report of ended epochs made it count packets
-/// missing.
+/// `asked` runs after each question, told whether its report of ended epochs made
+/// the inlet count packets missing.
 pub(crate) fn serve(
     node: &crate::Node,
     key: &str,
     name: &str,
     ledger: Arc<InletLedger>,
-    counted: impl Fn() + Send + Sync + 'static,
+    asked: impl Fn(bool) + Send + Sync + 'static,
 ) -> zenoh::Result<zenoh::query::Queryable<()>> {
     let own = format!("{key}/@ack/{}/{name}", node.name());
     let replier = node.replier();
@@ -429,9 +421,7 @@ pub(crate) fn serve(
                 None => Vec::new(),
             };
             let (answer, lost) = ledger.answer(&process, &ended);
-            if lost > 0 {
-                counted();
-            }
+            asked(lost > 0);
             // From the node's replier: a querier that does not read its answer holds
             // that thread, not Zenoh's.
             let reply_key = reply_key.clone();

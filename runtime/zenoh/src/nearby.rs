@@ -9,7 +9,7 @@
 //! takes on the producer's thread ([`coolbot::port::Intake`]) is in the consumer's
 //! input after one futex wake.
 //!
-//! **How the path is found.** The outlet asks `K/@ring` (a query carrying its host's
+//! **How the path is found.** The outlet asks `K/@ring/**` (a query carrying its host's
 //! boot id, its epoch, the number it has sent, and its own doorbell); an inlet on the
 //! same host makes a ring, adds the source to its consumer's bell and answers with
 //! both addresses. The answer comes on a Zenoh thread and is adopted by whichever of
@@ -18,18 +18,20 @@
 //!
 //! **Order.** Messages sent on the key after the question may still be on their way
 //! when the first goes into the ring: the consumer takes a ring message only once the
-//! stream has brought the one before it (or a second has passed: a link that broke
-//! lost it, and the ledger counts it). A message longer than a quarter of the ring
-//! sends the stream back to the key for good, once the consumer has taken everything
-//! in the ring. When the ring is full, the outlet leaves the packets at its input
-//! (whose overflow policy applies, as for a slow consumer in one process) and asks
-//! the consumer to ring it when it has taken.
+//! key's message before it is in the consumer's input (or a second has passed: a
+//! link that broke lost it, the ledger counts it, and a key message that still comes
+//! after is dropped by the inlet's `Delivered`). A message longer than a quarter of
+//! the ring sends the stream back to the key for good, once the consumer has taken
+//! everything in the ring. When the ring is full, the outlet leaves the packets at its
+//! input (whose overflow policy applies, as for a slow consumer in one process) and
+//! asks the consumer to ring it when it has taken.
 //!
-//! **Ends.** A consumer whose process ended, or whose inlet dropped the ring, is seen
-//! by the outlet on its next write: the stream goes back to the key (the messages
-//! left in the ring are lost, and counted as a gone inlet's are: `crate::ledger`), and
-//! the outlet asks again later. A producer that ends leaves the consumer its ring,
-//! replaced when that outlet asks again, and bounded in number per inlet.
+//! **Ends.** A consumer whose inlet closed its ring is seen by the outlet at its next
+//! write, one whose process ended within [`LIVENESS`] (or when the ring is full): the
+//! stream goes back to the key (the messages left in the ring are lost, and counted
+//! as a gone inlet's are: `crate::ledger`), and the outlet asks again later. A
+//! producer that ends leaves the consumer its ring, replaced when that outlet asks
+//! again, and bounded in number per inlet.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock, PoisonError, Weak};
@@ -37,14 +39,14 @@ use std::time::{Duration, Instant};
 
 use coolbot::port::{FifoIn, Intake, UfifoIn};
 use coolbot::ring::{Ring, RingAddress, RingWriter, WriteError};
-use coolbot::{BellAddress, ConsumerBell, Packet, RemoteBell, Source, SourceGuard};
+use coolbot::{BellAddress, Chain, ConsumerBell, Packet, RemoteBell, Source, SourceGuard};
 use serde::{Deserialize, Serialize};
 use zenoh::Wait;
 use zenoh::bytes::ZBytes;
 
 use crate::Error;
 use crate::delivery::{DeliverFn, Via};
-use crate::ledger::{self, InletLedger, Sent};
+use crate::ledger::{self, Sent};
 use crate::tally::Tally;
 
 /// The bytes of messages in one ring: 64 KiB (messages up to 16 KiB).
@@ -67,9 +69,9 @@ const GATE_PATIENCE: Duration = Duration::from_secs(1);
 /// has N producers).
 const MAX_RINGS: usize = 16;
 
-/// The key an inlet answers an outlet's question on.
-pub(crate) fn ask_key(key: &str) -> String {
-    format!("{key}/@ring")
+/// The keys an outlet asks its inlets for a ring on.
+fn ask_key(key: &str) -> String {
+    format!("{key}/@ring/**")
 }
 
 /// This host's identity: its boot id (two processes with the same one share the
@@ -110,7 +112,7 @@ struct Ask {
     /// The number the outlet had sent on the key when it asked.
     sent: u64,
     /// The outlet's own doorbell (rung when it waits for room).
-    bell: Option<BellAt>,
+    bell: BellAt,
     /// The outlet (`node/name`): a second question of the same outlet replaces its
     /// ring.
     outlet: String,
@@ -166,6 +168,29 @@ pub(crate) type Link<T> = Box<dyn Fn(&T) + Send + Sync>;
 struct OnRing {
     writer: RingWriter,
     consumer: RemoteBell,
+    /// When the consumer's process was last seen alive.
+    seen: Instant,
+}
+
+/// How often a writing outlet looks whether its consumer's process still runs (a
+/// killed process never closes its ring).
+const LIVENESS: Duration = Duration::from_millis(20);
+
+impl OnRing {
+    /// Whether the consumer is gone: its ring closed (a cheap look, each time), or
+    /// its process ended (a system call, at most every [`LIVENESS`]).
+    fn gone(&mut self, now: bool) -> bool {
+        if self.writer.is_closed() {
+            return true;
+        }
+        if now || self.seen.elapsed() >= LIVENESS {
+            if self.writer.is_gone() {
+                return true;
+            }
+            self.seen = Instant::now();
+        }
+        false
+    }
 }
 
 /// What an outlet's paths share, under one lock (their order).
@@ -196,7 +221,11 @@ pub(crate) struct Nearby<T, Q> {
     tally: Option<Arc<Tally>>,
     queue: Q,
     link: Link<T>,
+    /// Where a packet the outlet held when it was dropped is counted (its input).
+    losses: coolbot::port::ErasedInput,
     counters: Arc<crate::shm::Counters>,
+    /// Whether the outlet runs: the producer's thread writes only then.
+    running: AtomicBool,
     path: Mutex<Path<T>>,
     /// An answer's ring, opened on Zenoh's thread, adopted by the next send.
     offered: Arc<Mutex<Option<OnRing>>>,
@@ -216,29 +245,54 @@ enum Sent1<T> {
     Key(T),
 }
 
+/// Why a message did not go into the ring.
+enum Unwritten {
+    Ring(WriteError),
+    /// It does not encode: the key's path encodes it again, and counts it.
+    Encoding,
+}
+
+/// The parts of an outlet its same-host path sends with.
+pub(crate) struct Parts<T, Q> {
+    pub(crate) session: zenoh::Session,
+    pub(crate) key: String,
+    /// `node/name`.
+    pub(crate) outlet: String,
+    pub(crate) epoch: u64,
+    pub(crate) sent: Arc<Sent>,
+    pub(crate) tally: Option<Arc<Tally>>,
+    pub(crate) queue: Q,
+    pub(crate) link: Link<T>,
+    pub(crate) losses: coolbot::port::ErasedInput,
+    pub(crate) counters: Arc<crate::shm::Counters>,
+}
+
 impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
-    #[allow(clippy::too_many_arguments, reason = "the outlet's parts, once")]
-    pub(crate) fn new(
-        session: &zenoh::Session,
-        key: &str,
-        outlet: String,
-        epoch: u64,
-        sent: Arc<Sent>,
-        tally: Option<Arc<Tally>>,
-        queue: Q,
-        link: Link<T>,
-        counters: Arc<crate::shm::Counters>,
-    ) -> Arc<Nearby<T, Q>> {
-        Arc::new(Nearby {
-            session: session.clone(),
-            key: key.to_owned(),
+    pub(crate) fn new(parts: Parts<T, Q>) -> Arc<Nearby<T, Q>> {
+        let Parts {
+            session,
+            key,
             outlet,
             epoch,
             sent,
             tally,
             queue,
             link,
+            losses,
             counters,
+        } = parts;
+        Arc::new(Nearby {
+            session,
+            key,
+            outlet,
+            epoch,
+            sent,
+            tally,
+            queue,
+            link,
+            losses,
+            counters,
+            running: AtomicBool::new(false),
             path: Mutex::new(Path {
                 ring: None,
                 pending: None,
@@ -251,6 +305,13 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
             offered: Arc::default(),
             asking: Arc::default(),
         })
+    }
+
+    /// The outlet started (true) or stopped: the producer's thread writes into the
+    /// ring only while it runs (else its packets wait at the input, as for any
+    /// component that does not run).
+    pub(crate) fn set_running(&self, running: bool) {
+        self.running.store(running, Ordering::Release);
     }
 
     /// Take a ring an answer brought.
@@ -266,17 +327,18 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
     }
 
     /// Write `packet` as the next numbered message into `ring`.
-    fn write(&self, ring: &mut OnRing, buffer: &mut Vec<u8>, packet: &T) -> Result<(), WriteError> {
+    fn write(&self, ring: &mut OnRing, buffer: &mut Vec<u8>, packet: &T) -> Result<(), Unwritten> {
         let next = self.sent.get() + 1;
         buffer.clear();
         match postcard::to_extend(&(self.epoch, next, packet), std::mem::take(buffer)) {
             Ok(encoded) => *buffer = encoded,
             Err(error) => {
-                // Not this path's to count: the key's path encodes it again, and
-                // counts it.
                 tracing::trace!(key = %self.key, "ring message does not encode: {error}");
-                return Err(WriteError::TooLong);
+                return Err(Unwritten::Encoding);
             }
+        }
+        if ring.gone(false) {
+            return Err(Unwritten::Ring(WriteError::Gone));
         }
         // Tallied before the consumer can have it, as on the key.
         if let Some(tally) = &self.tally {
@@ -294,7 +356,7 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
                 if let Some(tally) = &self.tally {
                     tally.record(next - 1);
                 }
-                Err(error)
+                Err(Unwritten::Ring(error))
             }
         }
     }
@@ -310,39 +372,39 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
         let Some(on) = ring.as_mut() else {
             return Sent1::Key(packet);
         };
-        match self.write(on, buffer, &packet) {
-            Ok(()) => Sent1::Done,
-            Err(WriteError::Full) => {
-                if on.writer.is_gone() {
-                    self.lost_ring(path);
-                    return Sent1::Key(packet);
-                }
-                on.writer.ask_to_be_rung();
-                // Room made before the request was seen: try once more.
-                match self.write(on, buffer, &packet) {
-                    Ok(()) => Sent1::Done,
-                    Err(_) => Sent1::Wait(packet),
-                }
-            }
-            Err(WriteError::TooLong) => {
-                if on.writer.is_empty() {
-                    *key_only = true;
-                    *ring = None;
-                    tracing::debug!(key = %self.key, "a message too long for the ring: the outlet sends on the key from now on");
-                    return Sent1::Key(packet);
-                }
-                on.writer.ask_to_be_rung();
-                if on.writer.is_empty() {
-                    *key_only = true;
-                    *ring = None;
-                    return Sent1::Key(packet);
-                }
-                Sent1::Wait(packet)
-            }
-            Err(WriteError::Gone) => {
+        let wait_for = match self.write(on, buffer, &packet) {
+            Ok(()) => return Sent1::Done,
+            Err(Unwritten::Encoding) => return Sent1::Key(packet),
+            Err(Unwritten::Ring(WriteError::Gone)) => {
                 self.lost_ring(path);
+                return Sent1::Key(packet);
+            }
+            Err(Unwritten::Ring(error)) => error,
+        };
+        // Full, or too long while the ring is not empty: wait for the consumer to
+        // take, unless it is gone.
+        if on.gone(true) {
+            self.lost_ring(path);
+            return Sent1::Key(packet);
+        }
+        on.writer.ask_to_be_rung();
+        // Room made, or the ring emptied, before the request was seen: look again.
+        match wait_for {
+            WriteError::TooLong if on.writer.is_empty() => {
+                *key_only = true;
+                *ring = None;
+                tracing::debug!(key = %self.key, "a message too long for the ring: the outlet sends on the key from now on");
                 Sent1::Key(packet)
             }
+            WriteError::TooLong => Sent1::Wait(packet),
+            _ => match self.write(on, buffer, &packet) {
+                Ok(()) => Sent1::Done,
+                Err(Unwritten::Ring(WriteError::Full)) => Sent1::Wait(packet),
+                Err(_) => {
+                    self.lost_ring(path);
+                    Sent1::Key(packet)
+                }
+            },
         }
     }
 
@@ -390,7 +452,9 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
         if now < path.next_ask || self.asking.load(Ordering::Acquire) {
             return;
         }
-        let Some(host) = host() else {
+        let (Some(host), Some(bell)) = (host(), path.own.as_ref().and_then(|(_, at)| *at)) else {
+            // Not on Linux, or the outlet's own bell cannot be rung from another
+            // process (nobody could tell it of room): the key.
             path.key_only = true;
             return;
         };
@@ -400,7 +464,7 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
             host: host.to_owned(),
             epoch: self.epoch,
             sent: self.sent.get(),
-            bell: path.own.as_ref().and_then(|(_, at)| *at).map(bell_at),
+            bell: bell_at(bell),
             outlet: self.outlet.clone(),
         };
         let Ok(payload) = postcard::to_allocvec(&ask) else {
@@ -441,6 +505,7 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
                             Ok(OnRing {
                                 writer,
                                 consumer: RemoteBell::open(&bell_address(bell))?,
+                                seen: Instant::now(),
                             })
                         });
                         match opened {
@@ -456,6 +521,39 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
             .wait();
         if let Err(error) = asked {
             tracing::debug!(key = %self.key, "ring question not sent: {error}");
+        }
+    }
+
+    /// Write `packet` into the ring now, on the producer's thread, if the outlet runs,
+    /// nothing waits before it and the ring takes it.
+    fn offer(&self, packet: &T) -> bool {
+        if !self.running.load(Ordering::Acquire) {
+            return false;
+        }
+        let Ok(mut path) = self.path.try_lock() else {
+            return false;
+        };
+        self.adopt(&mut path);
+        if path.pending.is_some() || !self.queue.is_empty() {
+            return false;
+        }
+        let Path { ring, buffer, .. } = &mut *path;
+        let Some(on) = ring.as_mut() else {
+            return false;
+        };
+        self.write(on, buffer, packet).is_ok()
+    }
+}
+
+impl<T, Q> Drop for Nearby<T, Q> {
+    fn drop(&mut self) {
+        // A packet taken from the input and never sent: lost at the outlet's input.
+        let pending = self.path.get_mut().map_or_else(
+            |poisoned| poisoned.into_inner().pending.is_some(),
+            |p| p.pending.is_some(),
+        );
+        if pending {
+            self.losses.count_loss(1);
         }
     }
 }
@@ -480,25 +578,6 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Intake<T> for Inline<T, Q> {
     }
 }
 
-impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
-    /// Write `packet` into the ring now, on the producer's thread, if nothing waits
-    /// before it and the ring takes it.
-    fn offer(&self, packet: &T) -> bool {
-        let Ok(mut path) = self.path.try_lock() else {
-            return false;
-        };
-        self.adopt(&mut path);
-        if path.pending.is_some() || !self.queue.is_empty() {
-            return false;
-        }
-        let Path { ring, buffer, .. } = &mut *path;
-        let Some(on) = ring.as_mut() else {
-            return false;
-        };
-        self.write(on, buffer, packet).is_ok()
-    }
-}
-
 /// The source on an outlet's own bell: its thread forwards when rung (by the
 /// consumer that made room).
 struct OwnBell<T, Q> {
@@ -506,12 +585,17 @@ struct OwnBell<T, Q> {
 }
 
 impl<T: Packet + Serialize, Q: Queue<T> + 'static> Source for OwnBell<T, Q> {
+    /// A packet waits, and the ring has emptied or is gone (not while the consumer
+    /// has still to take: the thread sleeps until it rings).
     fn ready(&self) -> bool {
         self.nearby.upgrade().is_some_and(|nearby| {
-            nearby
-                .path
-                .try_lock()
-                .is_ok_and(|path| path.pending.is_some() && path.ring.is_some())
+            nearby.path.try_lock().is_ok_and(|path| {
+                path.pending.is_some()
+                    && path
+                        .ring
+                        .as_ref()
+                        .is_none_or(|ring| ring.writer.is_empty() || ring.writer.is_closed())
+            })
         })
     }
 
@@ -522,57 +606,105 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Source for OwnBell<T, Q> {
     }
 }
 
+/// What an outlet calls on its same-host path.
+pub(crate) trait SameHost: Send + Sync {
+    /// Send what waits at the input (the outlet's thread).
+    fn forward(&self);
+    /// The outlet started (true) or stopped.
+    fn set_running(&self, running: bool);
+}
+
+/// An outlet's same-host path, as the outlet holds it.
+pub(crate) struct Held<T, Q>(pub(crate) Arc<Nearby<T, Q>>);
+
+impl<T: Packet + Serialize, Q: Queue<T> + 'static> SameHost for Held<T, Q> {
+    fn forward(&self) {
+        self.0.forward();
+    }
+
+    fn set_running(&self, running: bool) {
+        self.0.set_running(running);
+    }
+}
+
 // ---------------------------------------------------------------------------------
 // The inlet's side.
+
+/// The newest number of an outlet epoch the inlet has handed to its consumer's input
+/// from the key (None: none yet).
+pub(crate) type NewestFn = Arc<dyn Fn(u64) -> Option<u64> + Send + Sync>;
+
+/// What an inlet's rings are made with.
+pub(crate) struct InletParts {
+    pub(crate) key: String,
+    /// Where it answers: `K/@ring/<node>/<name>` (under its node's name, as its
+    /// acknowledgments: access rules let a node answer only under its own).
+    pub(crate) answers_on: String,
+    pub(crate) deliver: DeliverFn,
+    pub(crate) newest: NewestFn,
+    /// The consumer's doorbell (the one component the inlet's output feeds).
+    pub(crate) consumer: Box<dyn Fn() -> Option<ConsumerBell> + Send + Sync>,
+    /// Where a ring that breaks its layout is counted (the inlet's `network` input).
+    pub(crate) lost: coolbot::port::ErasedInput,
+    pub(crate) counters: Arc<crate::shm::Counters>,
+}
+
+/// One ring of an inlet: the outlet it is for, the source on the consumer's bell,
+/// and that bell, rung to look at the ring again.
+struct Entry {
+    outlet: String,
+    source: Arc<RingSource>,
+    consumer: RemoteBell,
+    _guard: SourceGuard,
+}
 
 /// An inlet's rings: made when an outlet of its host asks, drained by its consumer's
 /// thread.
 pub(crate) struct InletRings {
-    key: String,
-    deliver: DeliverFn,
-    ledger: Arc<InletLedger>,
-    /// The consumer's doorbell (the one component the inlet's output feeds).
-    consumer: Box<dyn Fn() -> Option<ConsumerBell> + Send + Sync>,
-    /// Where a ring that breaks its layout is counted (the inlet's `network` input).
-    lost: coolbot::port::ErasedInput,
-    counters: Arc<crate::shm::Counters>,
-    rings: Mutex<Vec<(String, SourceGuard)>>,
+    parts: InletParts,
+    /// Whether it answers (the inlet runs), and its rings; under one lock, so that a
+    /// question answered as the inlet stops leaves no ring behind.
+    rings: Mutex<(bool, Vec<Entry>)>,
 }
 
 impl InletRings {
-    pub(crate) fn new(
-        key: &str,
-        deliver: DeliverFn,
-        ledger: Arc<InletLedger>,
-        consumer: Box<dyn Fn() -> Option<ConsumerBell> + Send + Sync>,
-        lost: coolbot::port::ErasedInput,
-        counters: Arc<crate::shm::Counters>,
-    ) -> Arc<InletRings> {
+    pub(crate) fn new(parts: InletParts) -> Arc<InletRings> {
         Arc::new(InletRings {
-            key: key.to_owned(),
-            deliver,
-            ledger,
-            consumer,
-            lost,
-            counters,
-            rings: Mutex::new(Vec::new()),
+            parts,
+            rings: Mutex::new((false, Vec::new())),
         })
     }
 
     /// Drop every ring (the inlet stopped): their outlets go back to the key.
     pub(crate) fn close(&self) {
-        let rings = std::mem::take(&mut *lock(&self.rings));
+        let rings = {
+            let mut rings = lock(&self.rings);
+            rings.0 = false;
+            std::mem::take(&mut rings.1)
+        };
         drop(rings);
     }
 
-    /// Answer the outlets' questions on `K/@ring` (until the queryable is dropped).
+    /// The outlet's ledger asked what the inlet has had: a ring whose first message
+    /// waits for the key's message before it is looked at again (the gate's patience
+    /// has no timer of its own; an outlet asks when its inlet is behind).
+    pub(crate) fn nudge(&self) {
+        for entry in &lock(&self.rings).1 {
+            if entry.source.held() {
+                entry.consumer.ring();
+            }
+        }
+    }
+
+    /// Answer the outlets' questions (until the queryable is dropped).
     pub(crate) fn serve(
         self: &Arc<Self>,
         session: &zenoh::Session,
     ) -> Result<zenoh::query::Queryable<()>, Error> {
+        lock(&self.rings).0 = true;
         let rings = Arc::downgrade(self);
         session
-            .declare_queryable(ask_key(&self.key))
+            .declare_queryable(&self.parts.answers_on)
             .callback(move |query| {
                 let Some(rings) = rings.upgrade() else {
                     return;
@@ -599,41 +731,59 @@ impl InletRings {
     }
 
     fn answer(&self, ask: Ask) -> Result<(RingAddress, BellAddress), String> {
+        let parts = &self.parts;
         if host() != Some(ask.host.as_str()) {
             return Err("another host".to_owned());
         }
-        let consumer = (self.consumer)()
+        let consumer = (parts.consumer)()
             .ok_or("the inlet's output does not feed one input directly (no consumer to ring)")?;
         let bell = consumer
             .address()
             .ok_or("the consumer's doorbell is not in shared memory")?;
         let ring = Ring::new(RING_BYTES).map_err(|error| format!("no ring: {error}"))?;
         let address = ring.address().ok_or("the ring has no address")?;
-        let writer = match ask.bell.map(bell_address) {
-            Some(at) => Some(RemoteBell::open(&at).map_err(|e| format!("the outlet's bell: {e}"))?),
-            None => None,
-        };
+        let writer = RemoteBell::open(&bell_address(ask.bell))
+            .map_err(|error| format!("the outlet's bell: {error}"))?;
+        let ring_again =
+            RemoteBell::open(&bell).map_err(|error| format!("the consumer's bell: {error}"))?;
         let source = Arc::new(RingSource {
             ring: Mutex::new(ring),
-            deliver: Arc::clone(&self.deliver),
-            ledger: Arc::clone(&self.ledger),
+            deliver: Arc::clone(&parts.deliver),
+            newest: Arc::clone(&parts.newest),
             writer,
             gate: Mutex::new(Gate::Closed {
                 asked_at: ask.sent,
                 since: None,
             }),
-            lost: self.lost.clone(),
-            counters: Arc::clone(&self.counters),
-            key: self.key.clone(),
+            lost: parts.lost.clone(),
+            counters: Arc::clone(&parts.counters),
+            key: parts.key.clone(),
             broken: AtomicBool::new(false),
         });
-        let guard = consumer.add_source(source);
         let mut rings = lock(&self.rings);
-        rings.retain(|(outlet, _)| *outlet != ask.outlet);
-        if rings.len() >= MAX_RINGS {
-            rings.remove(0);
+        if !rings.0 {
+            return Err("the inlet is not running".to_owned());
         }
-        rings.push((ask.outlet, guard));
+        let entries = &mut rings.1;
+        entries.retain(|entry| entry.outlet != ask.outlet);
+        if entries.len() >= MAX_RINGS {
+            // One no longer written and taken to its end goes (a producer that
+            // ended); a ring still in use is never dropped for a new one.
+            let idle = entries
+                .iter()
+                .position(|entry| !entry.source.has_messages());
+            match idle {
+                Some(at) => drop(entries.remove(at)),
+                None => return Err(format!("the inlet has {MAX_RINGS} rings in use")),
+            }
+        }
+        let guard = consumer.add_source(Arc::clone(&source) as Arc<dyn Source>);
+        entries.push(Entry {
+            outlet: ask.outlet,
+            source,
+            consumer: ring_again,
+            _guard: guard,
+        });
         Ok((address, bell))
     }
 }
@@ -654,9 +804,9 @@ enum Gate {
 struct RingSource {
     ring: Mutex<Ring>,
     deliver: DeliverFn,
-    ledger: Arc<InletLedger>,
-    /// The outlet's bell, rung when it waits for room.
-    writer: Option<RemoteBell>,
+    newest: NewestFn,
+    /// The outlet's bell, rung when it waits for room and when the ring closes.
+    writer: RemoteBell,
     gate: Mutex<Gate>,
     lost: coolbot::port::ErasedInput,
     counters: Arc<crate::shm::Counters>,
@@ -665,6 +815,30 @@ struct RingSource {
 }
 
 impl RingSource {
+    fn has_messages(&self) -> bool {
+        self.ring
+            .try_lock()
+            .map_or(true, |ring| ring.has_messages())
+    }
+
+    /// Whether its first message is held, waiting for the key.
+    fn held(&self) -> bool {
+        self.gate
+            .try_lock()
+            .is_ok_and(|gate| matches!(*gate, Gate::Closed { since: Some(_), .. }))
+    }
+
+    /// Whether the gate lets a message through now, or may (not yet looked at, or
+    /// its patience is over).
+    fn gate_may_open(&self) -> bool {
+        self.gate.try_lock().is_ok_and(|gate| match *gate {
+            Gate::Open | Gate::Closed { since: None, .. } => true,
+            Gate::Closed {
+                since: Some(since), ..
+            } => since.elapsed() >= GATE_PATIENCE,
+        })
+    }
+
     /// Whether the message `bytes` (numbered) may be delivered now.
     fn may_pass(&self, gate: &mut Gate, bytes: &[u8]) -> bool {
         let Gate::Closed { asked_at, since } = gate else {
@@ -677,18 +851,32 @@ impl RingSource {
         };
         let before = seq.saturating_sub(1);
         let waited = since.is_some_and(|since| since.elapsed() >= GATE_PATIENCE);
-        if before <= *asked_at || self.ledger.newest(epoch).is_some_and(|n| n >= before) || waited {
+        // The key's message before it handed to the consumer's input (not merely
+        // received: `newest` is read under the lock the key's delivery holds while it
+        // sends).
+        if before <= *asked_at || (self.newest)(epoch).is_some_and(|n| n >= before) || waited {
             *gate = Gate::Open;
             return true;
         }
         since.get_or_insert_with(Instant::now);
         false
     }
+
+    fn broke(&self, ring: &Ring, why: &str) {
+        self.broken.store(true, Ordering::Relaxed);
+        ring.close();
+        self.writer.ring();
+        self.lost.count_loss(1);
+        tracing::warn!(key = %self.key, "inlet lost what was left in a ring: {why}");
+    }
 }
 
 impl Source for RingSource {
+    /// Messages wait, and the gate may let them by.
     fn ready(&self) -> bool {
-        !self.broken.load(Ordering::Relaxed) && self.ring.try_lock().is_ok_and(|r| r.has_messages())
+        !self.broken.load(Ordering::Relaxed)
+            && self.ring.try_lock().is_ok_and(|ring| ring.has_messages())
+            && self.gate_may_open()
     }
 
     fn drain(&self) {
@@ -697,27 +885,38 @@ impl Source for RingSource {
         }
         let mut ring = lock(&self.ring);
         let mut gate = lock(&self.gate);
-        let taken = ring.take(|bytes| {
-            if !self.may_pass(&mut gate, bytes) {
-                return false;
-            }
-            (self.deliver)(&ZBytes::from(bytes.to_vec()), Via::Stream);
-            true
-        });
+        let taken = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            ring.take(|bytes| {
+                if !self.may_pass(&mut gate, bytes) {
+                    return false;
+                }
+                // Counted before the consumer can have it. A full `block` fifo is
+                // handled by the delivery as for the key: the inlet's backlog.
+                self.counters.ring_taken(1);
+                (self.deliver)(&ZBytes::from(bytes.to_vec()), Via::Stream);
+                true
+            })
+        }));
         match taken {
-            Ok(taken) => {
-                self.counters.ring_taken(taken.messages);
-                if taken.writer_waits
-                    && let Some(writer) = &self.writer
-                {
-                    writer.ring();
+            Ok(Ok(taken)) => {
+                if taken.writer_waits {
+                    self.writer.ring();
                 }
             }
-            Err(error) => {
-                self.broken.store(true, Ordering::Relaxed);
-                self.lost.count_loss(1);
-                tracing::warn!(key = %self.key, "inlet lost what was left in a ring: {error}");
-            }
+            Ok(Err(error)) => self.broke(&ring, &Chain(&error).to_string()),
+            Err(panic) => self.broke(
+                &ring,
+                &format!("its delivery panicked: {}", coolbot::panic_message(&*panic)),
+            ),
         }
+    }
+}
+
+impl Drop for RingSource {
+    fn drop(&mut self) {
+        // Closed before its memory goes: the outlet, perhaps waiting for room, is
+        // told now.
+        lock(&self.ring).close();
+        self.writer.ring();
     }
 }

@@ -562,9 +562,11 @@ impl End {
                         &output.key,
                         "proxy",
                         Arc::clone(&output.ledger),
-                        move || {
-                            shared.changed.store(true, Ordering::Release);
-                            shared.ring();
+                        move |counted| {
+                            if counted {
+                                shared.changed.store(true, Ordering::Release);
+                                shared.ring();
+                            }
                         },
                     )
                     .map_err(Error::zenoh("serve a proxy output's acknowledgments"))?,

@@ -121,7 +121,7 @@ const EVERY_KEY: [&str; 7] = [
     "**",
     "coolbot/*/@agent/*/*",
     "**/@pull",
-    "**/@ring",
+    "**/@ring/**",
     "**/@out/**",
     "**/@in/**",
     "**/@ack/**",
@@ -574,11 +574,13 @@ impl Security {
         let mut policies = vec![json!({ "rules": any, "subjects": ["any"] })];
         for (index, node) in self.node_names().into_iter().enumerate() {
             let subject = format!("node-{index}");
-            // Its inlets acknowledge under its name (`crate::ledger`).
+            // Its inlets acknowledge, and make rings for outlets of their host, under
+            // its name (`crate::ledger`, `crate::nearby`).
             let own = vec![
                 format!("{}/{node}/**", keys::ROOT),
                 keys::agent(node, "*", "*"),
                 format!("**/@ack/{node}/*"),
+                format!("**/@ring/{node}/*"),
             ];
             // Its inlets' tokens carry its name (and their process); its outlets'
             // tokens too, on the bridge keys a rule lets it publish on.
@@ -676,7 +678,7 @@ impl Security {
                 allowed
                     .publish
                     .iter()
-                    .map(|key| format!("{key}/@ack/**"))
+                    .flat_map(|key| [format!("{key}/@ack/**"), format!("{key}/@ring/**")])
                     .collect(),
             );
             // The producer on a bridge key answers its poster and pull queries.
@@ -989,7 +991,10 @@ mod tests {
             keys_of("read-bridges"),
             Some(json!(["robot/cmd", "robot/cmd/@pull"]))
         );
-        assert_eq!(keys_of("rule-0-ask"), Some(json!(["robot/cmd/@ack/**"])));
+        assert_eq!(
+            keys_of("rule-0-ask"),
+            Some(json!(["robot/cmd/@ack/**", "robot/cmd/@ring/**"]))
+        );
         // `**` does not reach the guarded keys: commands and instantiation are granted
         // only by the rules, and the verbatim chunks the crate uses are named.
         let includes = |pattern: &str, key: &str| {
@@ -1198,6 +1203,34 @@ mod tests {
                 "link/robot/out/pose/@ack/**",
                 true,
             ),
+            // Rings for outlets on the host (`crate::nearby`): asked for by the
+            // publishers of the key only, made under the inlet's own name only.
+            (
+                Some("station"),
+                "query",
+                "link/robot/out/pose/@ring/**",
+                true,
+            ),
+            (
+                Some("mallory"),
+                "query",
+                "link/robot/out/pose/@ring/**",
+                false,
+            ),
+            (
+                Some("ops"),
+                "declare_queryable",
+                "link/a/@ring/ops/inlet",
+                true,
+            ),
+            (Some("ops"), "reply", "link/a/@ring/ops/inlet", true),
+            (
+                Some("ops"),
+                "declare_queryable",
+                "link/a/@ring/station/inlet",
+                false,
+            ),
+            (Some("ops"), "reply", "link/a/@ring/station/inlet", false),
             // Everyone watches and observes; only the rules command and instantiate.
             (None, "declare_subscriber", "coolbot/robot/logger/m", true),
             (None, "liveliness_query", "coolbot/*", true),
