@@ -14,8 +14,11 @@
 //! put; the descriptor still travels over the TCP link); raw iceoryx2
 //! (publish-subscribe of a byte slice, an event service whose listener the receiver
 //! blocks on); the coolbot bridge with shared memory off (the TCP bridge: an outlet
-//! and an inlet) and on. The bridge carries a packet of one `[u8]` field as coolc
-//! generates it (its bytes serialized as one slice); `bridge-shm-lent` carries it as a
+//! and an inlet, fifo) and on: a small packet then goes through a ring of the
+//! receiver's process, written on the sender's thread, a large one through Zenoh's
+//! shared memory (`docs/distribution.md`, "Same host: a ring"). The bridge carries
+//! a packet of one `[u8]` field as coolc generates it (its bytes serialized as one
+//! slice); `bridge-shm-lent` carries it as a
 //! `coolbot::Bytes`, which the receiver decodes in place, in the sender's buffer;
 //! `bridge-shm-loan` fills that `Bytes` in a loan of the sender node's pool
 //! (`coolbot::Bytes::loan`: the one copy of the frame, as raw Zenoh's into its
@@ -27,8 +30,7 @@
 //! copies the packet into the shared slot and rings the component's own doorbell
 //! (`coolbot::RemoteBell`); the component's thread wakes, drains the slot through a
 //! `coolbot::Source` into its fifo input and handles the packet in its section: the
-//! path a same-host engine that wakes the consuming component's own thread would
-//! take, without its queue and accounting.
+//! bridge's ring path without its queue and accounting.
 //!
 //! And the fan-out (`fan`): a producer process sends 4 MiB packets at 30 Hz through
 //! the bridge with shared memory to 1 and to 3 consumer processes on one `last`
