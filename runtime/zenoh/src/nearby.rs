@@ -213,17 +213,7 @@ struct Path<T> {
 
 /// An outlet's same-host path: see the module documentation.
 pub(crate) struct Nearby<T, Q> {
-    session: zenoh::Session,
-    key: String,
-    outlet: String,
-    epoch: u64,
-    sent: Arc<Sent>,
-    tally: Option<Arc<Tally>>,
-    queue: Q,
-    link: Link<T>,
-    /// Where a packet the outlet held when it was dropped is counted (its input).
-    losses: coolbot::port::ErasedInput,
-    counters: Arc<crate::shm::Counters>,
+    parts: Parts<T, Q>,
     /// Whether the outlet runs: the producer's thread writes only then.
     running: AtomicBool,
     path: Mutex<Path<T>>,
@@ -263,35 +253,15 @@ pub(crate) struct Parts<T, Q> {
     pub(crate) tally: Option<Arc<Tally>>,
     pub(crate) queue: Q,
     pub(crate) link: Link<T>,
+    /// Where a packet the outlet held when it was dropped is counted (its input).
     pub(crate) losses: coolbot::port::ErasedInput,
     pub(crate) counters: Arc<crate::shm::Counters>,
 }
 
 impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
     pub(crate) fn new(parts: Parts<T, Q>) -> Arc<Nearby<T, Q>> {
-        let Parts {
-            session,
-            key,
-            outlet,
-            epoch,
-            sent,
-            tally,
-            queue,
-            link,
-            losses,
-            counters,
-        } = parts;
         Arc::new(Nearby {
-            session,
-            key,
-            outlet,
-            epoch,
-            sent,
-            tally,
-            queue,
-            link,
-            losses,
-            counters,
+            parts,
             running: AtomicBool::new(false),
             path: Mutex::new(Path {
                 ring: None,
@@ -322,18 +292,18 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
         {
             path.ring = Some(ring);
             path.wait = FIRST_WAIT;
-            tracing::debug!(key = %self.key, "outlet writes into a ring of its consumer's process");
+            tracing::debug!(key = %self.parts.key, "outlet writes into a ring of its consumer's process");
         }
     }
 
     /// Write `packet` as the next numbered message into `ring`.
     fn write(&self, ring: &mut OnRing, buffer: &mut Vec<u8>, packet: &T) -> Result<(), Unwritten> {
-        let next = self.sent.get() + 1;
+        let next = self.parts.sent.get() + 1;
         buffer.clear();
-        match postcard::to_extend(&(self.epoch, next, packet), std::mem::take(buffer)) {
+        match postcard::to_extend(&(self.parts.epoch, next, packet), std::mem::take(buffer)) {
             Ok(encoded) => *buffer = encoded,
             Err(error) => {
-                tracing::trace!(key = %self.key, "ring message does not encode: {error}");
+                tracing::trace!(key = %self.parts.key, "ring message does not encode: {error}");
                 return Err(Unwritten::Encoding);
             }
         }
@@ -341,19 +311,19 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
             return Err(Unwritten::Ring(WriteError::Gone));
         }
         // Tallied before the consumer can have it, as on the key.
-        if let Some(tally) = &self.tally {
+        if let Some(tally) = &self.parts.tally {
             tally.record(next);
         }
         match ring.writer.write(buffer) {
             Ok(()) => {
-                self.sent.set(next);
+                self.parts.sent.set(next);
                 ring.consumer.ring();
-                self.counters.ring_written();
-                tracing::trace!(target: ledger::LEDGER_TARGET, "{} sent {} {next}", self.key, self.epoch);
+                self.parts.counters.ring_written();
+                tracing::trace!(target: ledger::LEDGER_TARGET, "{} sent {} {next}", self.parts.key, self.parts.epoch);
                 Ok(())
             }
             Err(error) => {
-                if let Some(tally) = &self.tally {
+                if let Some(tally) = &self.parts.tally {
                     tally.record(next - 1);
                 }
                 Err(Unwritten::Ring(error))
@@ -393,7 +363,7 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
             WriteError::TooLong if on.writer.is_empty() => {
                 *key_only = true;
                 *ring = None;
-                tracing::debug!(key = %self.key, "a message too long for the ring: the outlet sends on the key from now on");
+                tracing::debug!(key = %self.parts.key, "a message too long for the ring: the outlet sends on the key from now on");
                 Sent1::Key(packet)
             }
             WriteError::TooLong => Sent1::Wait(packet),
@@ -411,7 +381,7 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
     fn lost_ring(&self, path: &mut Path<T>) {
         path.ring = None;
         path.next_ask = Instant::now() + path.wait;
-        tracing::debug!(key = %self.key, "the consumer's ring is gone: the outlet sends on the key");
+        tracing::debug!(key = %self.parts.key, "the consumer's ring is gone: the outlet sends on the key");
     }
 
     /// Send what waits at the input (the outlet's thread: its section, or its
@@ -419,7 +389,7 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
     pub(crate) fn forward(self: &Arc<Self>) {
         let mut path = lock(&self.path);
         if path.own.is_none()
-            && let Some(bell) = self.queue.bell()
+            && let Some(bell) = self.parts.queue.bell()
         {
             let source: Arc<dyn Source> = Arc::new(OwnBell {
                 nearby: Arc::downgrade(self),
@@ -432,7 +402,7 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
             self.ask(&mut path);
         }
         loop {
-            let Some(packet) = path.pending.take().or_else(|| self.queue.next()) else {
+            let Some(packet) = path.pending.take().or_else(|| self.parts.queue.next()) else {
                 return;
             };
             match self.send_one(&mut path, packet) {
@@ -441,7 +411,7 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
                     path.pending = Some(packet);
                     return;
                 }
-                Sent1::Key(packet) => (self.link)(&packet),
+                Sent1::Key(packet) => (self.parts.link)(&packet),
             }
         }
     }
@@ -462,10 +432,10 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
         path.wait = (path.wait * 2).min(LONGEST_WAIT);
         let ask = Ask {
             host: host.to_owned(),
-            epoch: self.epoch,
-            sent: self.sent.get(),
+            epoch: self.parts.epoch,
+            sent: self.parts.sent.get(),
             bell: bell_at(bell),
-            outlet: self.outlet.clone(),
+            outlet: self.parts.outlet.clone(),
         };
         let Ok(payload) = postcard::to_allocvec(&ask) else {
             return;
@@ -473,10 +443,11 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
         let offered = Arc::clone(&self.offered);
         self.asking.store(true, Ordering::Release);
         let done = Asking(Arc::clone(&self.asking));
-        let key = self.key.clone();
+        let key = self.parts.key.clone();
         let asked = self
+            .parts
             .session
-            .get(ask_key(&self.key))
+            .get(ask_key(&self.parts.key))
             .payload(payload)
             .timeout(ASK_TIMEOUT)
             .callback(move |reply| {
@@ -520,7 +491,7 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
             })
             .wait();
         if let Err(error) = asked {
-            tracing::debug!(key = %self.key, "ring question not sent: {error}");
+            tracing::debug!(key = %self.parts.key, "ring question not sent: {error}");
         }
     }
 
@@ -534,7 +505,7 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
             return false;
         };
         self.adopt(&mut path);
-        if path.pending.is_some() || !self.queue.is_empty() {
+        if path.pending.is_some() || !self.parts.queue.is_empty() {
             return false;
         }
         let Path { ring, buffer, .. } = &mut *path;
@@ -553,7 +524,7 @@ impl<T, Q> Drop for Nearby<T, Q> {
             |p| p.pending.is_some(),
         );
         if pending {
-            self.losses.count_loss(1);
+            self.parts.losses.count_loss(1);
         }
     }
 }
