@@ -59,6 +59,14 @@ impl Mapping {
         {
             use std::os::unix::fs::OpenOptionsExt;
             let path = format!("/proc/{pid}/fd/{fd}");
+            // What the descriptor is, before it is opened (opening a device can do
+            // something): only a regular file (a memfd is one) is.
+            if !std::fs::metadata(&path)?.is_file() {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidData,
+                    format!("{path} is not shared memory"),
+                ));
+            }
             // Never blocks nor takes a terminal, whatever the descriptor turns out to
             // be (a number from another process).
             let file = std::fs::OpenOptions::new()

@@ -155,6 +155,11 @@ impl Ring {
         self.shared.u64s()
     }
 
+    /// Whether the writer never wrote into it.
+    pub fn is_unused(&self) -> bool {
+        self.words()[HEAD_AT].load(Ordering::Acquire) == 0
+    }
+
     /// Whether a message waits to be taken.
     pub fn has_messages(&self) -> bool {
         let words = self.words();

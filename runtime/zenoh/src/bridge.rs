@@ -973,8 +973,9 @@ const DELIVERED_EPOCHS: usize = 16;
 /// gets each packet once, and never an older one after it.
 #[derive(Default)]
 struct Delivered {
-    /// `(epoch, newest on the stream, answered ahead of the stream)`, oldest first.
-    epochs: Vec<(u64, u64, Option<u64>)>,
+    /// `(epoch, newest on the stream, answered ahead of the stream, newest a ring
+    /// brought)`, oldest first.
+    epochs: Vec<(u64, u64, Option<u64>, u64)>,
 }
 
 impl Delivered {
@@ -982,8 +983,8 @@ impl Delivered {
     fn stream(&self, epoch: u64) -> Option<u64> {
         self.epochs
             .iter()
-            .find(|(e, _, _)| *e == epoch)
-            .map(|(_, stream, _)| *stream)
+            .find(|(e, ..)| *e == epoch)
+            .map(|(_, stream, ..)| *stream)
     }
 
     /// Whether message `seq` of `epoch`, come `via`, is to be delivered (and is now
@@ -998,25 +999,28 @@ impl Delivered {
             // the stream.
             return true;
         }
-        let at = match self.epochs.iter().position(|(e, _, _)| *e == epoch) {
+        let at = match self.epochs.iter().position(|(e, ..)| *e == epoch) {
             Some(at) => at,
             None => {
                 if self.epochs.len() >= DELIVERED_EPOCHS {
                     self.epochs.remove(0);
                 }
-                self.epochs.push((epoch, 0, None));
+                self.epochs.push((epoch, 0, None, 0));
                 self.epochs.len() - 1
             }
         };
-        let (_, stream, answered) = &mut self.epochs[at];
+        let (_, stream, answered, ring) = &mut self.epochs[at];
         match via {
-            // Older than the stream's newest, and not far: a message of the key that
-            // came after a ring's (its wait was over, `crate::nearby`), which the
-            // ledger counted missing then. Dropped: the consumer never gets a packet
-            // after a newer one. (Further behind, a number made up by a peer: as for
-            // answers, it holds back at most [`ANSWER_AHEAD`] of the stream.)
-            Via::Stream if seq <= *stream && *stream - seq <= ANSWER_AHEAD => false,
-            Via::Stream => {
+            // A message of the key at or below one a ring of the host delivered: it
+            // came after a newer one (the ring's wait for it was over,
+            // `crate::nearby`), and the ledger counted it missing then. Dropped: the
+            // consumer never gets a packet after a newer one. (Only the ring's
+            // numbers count here, never a number of the key a peer made up.)
+            Via::Stream if seq <= *ring => false,
+            Via::Stream | Via::Ring => {
+                if via == Via::Ring {
+                    *ring = (*ring).max(seq);
+                }
                 *stream = (*stream).max(seq);
                 match *answered {
                     Some(ahead) if seq < ahead && ahead - seq <= ANSWER_AHEAD => false,
@@ -1121,7 +1125,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
                         "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
                     )),
                     Ok((epoch, seq, events)) => {
-                        if via == Via::Stream {
+                        if matches!(via, Via::Stream | Via::Ring) {
                             gaps.received(epoch, seq);
                         }
                         for _ in 0..events {
@@ -1144,13 +1148,13 @@ fn deliverer<T: Packet + DeserializeOwned>(
                 let taken = shared.received(payload, max_payload, |bytes| {
                     match codec::decode_parts::<Numbered<T>>(bytes, max_payload) {
                         Ok((epoch, seq, packet)) => {
-                            if via == Via::Stream {
+                            // Under the lock: the stream, a ring and an answer come on
+                            // different threads; the ledger and `delivered` see them in
+                            // one order, and the one taken as newer is sent last.
+                            let mut delivered = lock(&delivered);
+                            if matches!(via, Via::Stream | Via::Ring) {
                                 gaps.received(epoch, seq);
                             }
-                            // Under the lock: the stream and an answer come on
-                            // different threads, and the one taken as newer is sent
-                            // last.
-                            let mut delivered = lock(&delivered);
                             if !delivered.fresh(epoch, seq, via) {
                                 return;
                             }
@@ -1383,8 +1387,8 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
                 deliver: Arc::clone(&deliver),
                 newest,
                 consumer,
-                lost: network.erased(),
                 counters: node.shared_memory_counters(),
+                replier: node.replier(),
             })
         });
         let acks = match pull {
@@ -1595,6 +1599,21 @@ mod tests {
         // Unnumbered answers (pulls) are never repeats.
         assert!(delivered.fresh(8, 0, Via::Answer));
         assert!(delivered.fresh(8, 0, Via::Answer));
+    }
+
+    #[test]
+    fn a_key_message_after_a_newer_one_from_a_ring_is_dropped_and_a_made_up_number_drops_nothing() {
+        let mut delivered = Delivered::default();
+        assert!(delivered.fresh(9, 1, Via::Stream));
+        // The ring's wait for 2 was over: 3 went first.
+        assert!(delivered.fresh(9, 3, Via::Ring));
+        assert!(!delivered.fresh(9, 2, Via::Stream), "older than the ring's");
+        assert!(delivered.fresh(9, 4, Via::Ring));
+        assert_eq!(delivered.stream(9), Some(4));
+        // A number of the key far ahead (made up by a peer) holds back no honest one.
+        assert!(delivered.fresh(8, 200, Via::Stream));
+        assert!(delivered.fresh(8, 2, Via::Stream));
+        assert!(delivered.fresh(8, 3, Via::Stream));
     }
 
     #[test]

@@ -10,13 +10,15 @@ use zenoh::bytes::ZBytes;
 /// as Zenoh holds it, and checks its length before copying or decoding it.
 pub(crate) type DeliverFn = Arc<dyn Fn(&ZBytes, Via) + Send + Sync>;
 
-/// How a message reached an inlet: on the key's stream (numbered, counted by the
-/// ledger), or as the answer to a query (the current value of a `last` or poster
+/// How a message reached an inlet: on the key's stream or a ring (numbered, counted
+/// by the ledger), or as the answer to a query (the current value of a `last` or poster
 /// outlet, or a pull), which the ledger does not count.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Via {
-    /// The key's numbered stream, or a ring of the same messages (`crate::nearby`).
+    /// The key's numbered stream.
     Stream,
+    /// A ring of the same messages, from an outlet of this host (`crate::nearby`).
+    Ring,
     /// The current value of a `last` or poster outlet, on Zenoh's receiving thread.
     Answer,
     /// The answer to a pull request, on the inlet's (or proxy's) own thread while it

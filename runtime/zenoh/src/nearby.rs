@@ -207,6 +207,10 @@ struct Path<T> {
     /// The source on the outlet's own bell (its thread forwards when the consumer
     /// rings it), and that bell's address; made on the first forward.
     own: Option<(SourceGuard, Option<BellAddress>)>,
+    /// Rings the outlet when an inlet of the key goes away (a consumer's process that
+    /// ended cannot ring it), so that an outlet waiting for room sees it; made when a
+    /// ring is first used.
+    watch: Option<zenoh::pubsub::Subscriber<()>>,
     /// The message buffer.
     buffer: Vec<u8>,
 }
@@ -270,6 +274,7 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
                 next_ask: Instant::now(),
                 wait: FIRST_WAIT,
                 own: None,
+                watch: None,
                 buffer: Vec::new(),
             }),
             offered: Arc::default(),
@@ -387,6 +392,11 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
     /// Send what waits at the input (the outlet's thread: its section, or its
     /// doorbell rung by the consumer).
     pub(crate) fn forward(self: &Arc<Self>) {
+        // A stopped outlet sends nothing (its bell still rings for arrivals, and its
+        // sources are drained on such turns); it forwards again when it starts.
+        if !self.running.load(Ordering::Acquire) {
+            return;
+        }
         let mut path = lock(&self.path);
         if path.own.is_none()
             && let Some(bell) = self.parts.queue.bell()
@@ -401,6 +411,9 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
         if path.ring.is_none() && !path.key_only {
             self.ask(&mut path);
         }
+        if path.ring.is_some() && path.watch.is_none() {
+            path.watch = self.watch(&path);
+        }
         loop {
             let Some(packet) = path.pending.take().or_else(|| self.parts.queue.next()) else {
                 return;
@@ -414,6 +427,25 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Nearby<T, Q> {
                 Sent1::Key(packet) => (self.parts.link)(&packet),
             }
         }
+    }
+
+    /// A watch of the key's inlets' tokens that rings the outlet's own bell when one
+    /// goes (None: it cannot be made; the outlet then sees a gone consumer at its next
+    /// send).
+    fn watch(&self, path: &Path<T>) -> Option<zenoh::pubsub::Subscriber<()>> {
+        let own = path.own.as_ref().and_then(|(_, at)| *at)?;
+        let bell = RemoteBell::open(&own).ok()?;
+        self.parts
+            .session
+            .liveliness()
+            .declare_subscriber(format!("{}/@in/**", self.parts.key))
+            .callback(move |sample| {
+                if sample.kind() == zenoh::sample::SampleKind::Delete {
+                    bell.ring();
+                }
+            })
+            .wait()
+            .ok()
     }
 
     /// Ask the key's inlets for a ring, if it is time (the answer comes later).
@@ -560,13 +592,14 @@ impl<T: Packet + Serialize, Q: Queue<T> + 'static> Source for OwnBell<T, Q> {
     /// has still to take: the thread sleeps until it rings).
     fn ready(&self) -> bool {
         self.nearby.upgrade().is_some_and(|nearby| {
-            nearby.path.try_lock().is_ok_and(|path| {
-                path.pending.is_some()
-                    && path
-                        .ring
-                        .as_ref()
-                        .is_none_or(|ring| ring.writer.is_empty() || ring.writer.is_closed())
-            })
+            nearby.running.load(Ordering::Acquire)
+                && nearby.path.try_lock().is_ok_and(|path| {
+                    path.pending.is_some()
+                        && path
+                            .ring
+                            .as_ref()
+                            .is_none_or(|ring| ring.writer.is_empty() || ring.writer.is_closed())
+                })
         })
     }
 
@@ -615,15 +648,17 @@ pub(crate) struct InletParts {
     pub(crate) newest: NewestFn,
     /// The consumer's doorbell (the one component the inlet's output feeds).
     pub(crate) consumer: Box<dyn Fn() -> Option<ConsumerBell> + Send + Sync>,
-    /// Where a ring that breaks its layout is counted (the inlet's `network` input).
-    pub(crate) lost: coolbot::port::ErasedInput,
     pub(crate) counters: Arc<crate::shm::Counters>,
+    pub(crate) replier: crate::reply::Replier,
 }
 
 /// One ring of an inlet: the outlet it is for, the source on the consumer's bell,
 /// and that bell, rung to look at the ring again.
 struct Entry {
-    outlet: String,
+    /// The outlet (`node/name`) and its epoch.
+    outlet: (String, u64),
+    /// The outlet's process.
+    pid: u32,
     source: Arc<RingSource>,
     consumer: RemoteBell,
     _guard: SourceGuard,
@@ -683,7 +718,7 @@ impl InletRings {
                 let Some(payload) = query.payload() else {
                     return;
                 };
-                let Ok(ask) = crate::codec::decode::<Ask>(&payload.to_bytes(), 1024) else {
+                let Ok(ask) = crate::codec::decode_payload::<Ask>(payload, 1024) else {
                     return;
                 };
                 let answer = match rings.answer(ask) {
@@ -693,9 +728,16 @@ impl InletRings {
                     },
                     Err(reason) => Answer::No(reason),
                 };
-                if let Ok(bytes) = postcard::to_allocvec(&answer) {
-                    let _ = query.reply(query.key_expr().clone(), bytes).wait();
-                }
+                let Ok(bytes) = postcard::to_allocvec(&answer) else {
+                    return;
+                };
+                // On its own key (access rules allow a node's replies there only), from
+                // the node's replier (a querier that does not read holds that thread,
+                // not Zenoh's).
+                let key = rings.parts.answers_on.clone();
+                rings.parts.replier.send("a ring's answer", move || {
+                    let _ = query.reply(key, bytes).wait();
+                });
             })
             .wait()
             .map_err(Error::zenoh("declare the inlet's ring queryable"))
@@ -706,17 +748,37 @@ impl InletRings {
         if host() != Some(ask.host.as_str()) {
             return Err("another host".to_owned());
         }
+        let outlet = (ask.outlet, ask.epoch);
+        {
+            // What can be refused is refused before anything is made.
+            let mut rings = lock(&self.rings);
+            if !rings.0 {
+                return Err("the inlet is not running".to_owned());
+            }
+            rings.1.retain(|entry| !entry.ended());
+            if let Some(entry) = rings.1.iter().find(|entry| entry.outlet == outlet)
+                && !entry.source.unused()
+            {
+                // An outlet that has written into its ring does not ask again while
+                // the ring works: a question that says it is that outlet is another
+                // peer's, or came too late.
+                return Err("that outlet has a ring in use".to_owned());
+            }
+            if rings.1.len() >= MAX_RINGS && !rings.1.iter().any(|e| e.outlet == outlet) {
+                return Err(format!("the inlet has {MAX_RINGS} rings in use"));
+            }
+        }
         let consumer = (parts.consumer)()
             .ok_or("the inlet's output does not feed one input directly (no consumer to ring)")?;
         let bell = consumer
             .address()
             .ok_or("the consumer's doorbell is not in shared memory")?;
-        let ring = Ring::new(RING_BYTES).map_err(|error| format!("no ring: {error}"))?;
-        let address = ring.address().ok_or("the ring has no address")?;
         let writer = RemoteBell::open(&bell_address(ask.bell))
             .map_err(|error| format!("the outlet's bell: {error}"))?;
         let ring_again =
             RemoteBell::open(&bell).map_err(|error| format!("the consumer's bell: {error}"))?;
+        let ring = Ring::new(RING_BYTES).map_err(|error| format!("no ring: {error}"))?;
+        let address = ring.address().ok_or("the ring has no address")?;
         let source = Arc::new(RingSource {
             ring: Mutex::new(ring),
             deliver: Arc::clone(&parts.deliver),
@@ -726,7 +788,6 @@ impl InletRings {
                 asked_at: ask.sent,
                 since: None,
             }),
-            lost: parts.lost.clone(),
             counters: Arc::clone(&parts.counters),
             key: parts.key.clone(),
             broken: AtomicBool::new(false),
@@ -736,26 +797,28 @@ impl InletRings {
             return Err("the inlet is not running".to_owned());
         }
         let entries = &mut rings.1;
-        entries.retain(|entry| entry.outlet != ask.outlet);
+        entries.retain(|entry| entry.outlet != outlet);
         if entries.len() >= MAX_RINGS {
-            // One no longer written and taken to its end goes (a producer that
-            // ended); a ring still in use is never dropped for a new one.
-            let idle = entries
-                .iter()
-                .position(|entry| !entry.source.has_messages());
-            match idle {
-                Some(at) => drop(entries.remove(at)),
-                None => return Err(format!("the inlet has {MAX_RINGS} rings in use")),
-            }
+            return Err(format!("the inlet has {MAX_RINGS} rings in use"));
         }
         let guard = consumer.add_source(Arc::clone(&source) as Arc<dyn Source>);
         entries.push(Entry {
-            outlet: ask.outlet,
+            outlet,
+            pid: ask.bell.0,
             source,
             consumer: ring_again,
             _guard: guard,
         });
         Ok((address, bell))
+    }
+}
+
+impl Entry {
+    /// Whether its outlet will not write into it again: the ring broke, or the
+    /// outlet's process ended.
+    fn ended(&self) -> bool {
+        self.source.broken.load(Ordering::Relaxed)
+            || !std::path::Path::new(&format!("/proc/{}", self.pid)).exists()
     }
 }
 
@@ -779,17 +842,15 @@ struct RingSource {
     /// The outlet's bell, rung when it waits for room and when the ring closes.
     writer: RemoteBell,
     gate: Mutex<Gate>,
-    lost: coolbot::port::ErasedInput,
     counters: Arc<crate::shm::Counters>,
     key: String,
     broken: AtomicBool,
 }
 
 impl RingSource {
-    fn has_messages(&self) -> bool {
-        self.ring
-            .try_lock()
-            .map_or(true, |ring| ring.has_messages())
+    /// Whether its outlet never wrote into it (an answer it did not adopt).
+    fn unused(&self) -> bool {
+        self.ring.try_lock().is_ok_and(|ring| ring.is_unused())
     }
 
     /// Whether its first message is held, waiting for the key.
@@ -833,12 +894,13 @@ impl RingSource {
         false
     }
 
+    /// Close it: what was left in it is dropped (the numbers are counted missing
+    /// when the key brings the next), and the outlet, told, goes back to the key.
     fn broke(&self, ring: &Ring, why: &str) {
         self.broken.store(true, Ordering::Relaxed);
         ring.close();
         self.writer.ring();
-        self.lost.count_loss(1);
-        tracing::warn!(key = %self.key, "inlet lost what was left in a ring: {why}");
+        tracing::warn!(key = %self.key, "inlet dropped what was left in a ring: {why}");
     }
 }
 
@@ -864,7 +926,7 @@ impl Source for RingSource {
                 // Counted before the consumer can have it. A full `block` fifo is
                 // handled by the delivery as for the key: the inlet's backlog.
                 self.counters.ring_taken(1);
-                (self.deliver)(&ZBytes::from(bytes.to_vec()), Via::Stream);
+                (self.deliver)(&ZBytes::from(bytes.to_vec()), Via::Ring);
                 true
             })
         }));
