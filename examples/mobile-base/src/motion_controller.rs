@@ -97,6 +97,8 @@ impl MotionController {
             .angular
             .clamp(-cx.config.max_turn_rate, cx.config.max_turn_rate);
 
+        // A bus that hangs once (`Platform::hiccup`) holds the section up.
+        cx.rt.spend(self.platform.bus_delay());
         let drive = self.platform.drive(linear, angular, dt);
         cx.vars.distance += drive.moved;
         cx.vars.odometry = Pose2D {

@@ -377,6 +377,8 @@ pub struct Platform {
     overload: Option<Overload>,
     /// An overload switched on by hand ([`Platform::set_overloaded`]).
     overloaded: AtomicBool,
+    /// How long the next drive command takes the platform's bus ([`Platform::hiccup`]).
+    hiccup: Mutex<Option<Duration>>,
     truth: Mutex<Truth>,
 }
 
@@ -403,6 +405,7 @@ impl Platform {
             fault,
             overload: None,
             overloaded: AtomicBool::new(false),
+            hiccup: Mutex::new(None),
             truth: Mutex::new(Truth {
                 pose: start,
                 distance: 0.0,
@@ -465,6 +468,22 @@ impl Platform {
         if let Some(clock) = self.clock.as_virtual() {
             clock.set_idle(idle);
         }
+    }
+
+    /// Makes the next drive command take `delay` on the platform's bus (a driver that
+    /// hangs once, as a real one does on a bus error): the motion controller's section
+    /// spends it (`Context::spend`), and past its `max_response` the section overruns.
+    pub fn hiccup(&self, delay: Duration) {
+        *self.hiccup.lock().unwrap_or_else(PoisonError::into_inner) = Some(delay);
+    }
+
+    /// The time the coming drive command takes on the bus: a hiccup's once, then none.
+    pub fn bus_delay(&self) -> Duration {
+        self.hiccup
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take()
+            .unwrap_or_default()
     }
 
     /// The simulated shortage window, if any.

@@ -383,6 +383,78 @@ fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
 }
 
 #[test]
+fn a_motion_controller_past_its_max_response_is_restarted_and_the_robot_drives_on() {
+    use mobile_base::robot::{MOTION, Robot, Setup};
+
+    let platform = platform(None);
+    let setup = Setup {
+        noise: Some(0.0),
+        seed: 1,
+        ..Setup::default()
+    };
+    let robot = Robot::start(&platform, &setup).expect("the robot starts");
+    let distance = |m: &Monitor| {
+        m.variables
+            .iter()
+            .find(|(name, _)| name == "distance")
+            .and_then(|(_, value)| value.to_json().as_f64())
+            .unwrap_or(0.0)
+    };
+    wait_member(
+        &robot,
+        &platform,
+        MOTION,
+        |m| m.state == State::Running && distance(m) > 0.05,
+        Duration::from_secs(3),
+    )
+    .expect("the base gets going");
+    // The platform's bus hangs once for 30 ms, three times the motion controller's
+    // `max_response` (10 ms): the section overruns and the controller fails.
+    platform.hiccup(Duration::from_millis(30));
+    let overran = wait_member(
+        &robot,
+        &platform,
+        MOTION,
+        |m| m.overruns == 1 && m.state == State::Running,
+        Duration::from_secs(2),
+    )
+    .expect("the motion controller overran and runs again");
+    assert_eq!(overran.error, None, "{overran:?}");
+    // `on error motion: restart`: the base restarted it in place, and nothing
+    // propagated: the base and the robot run on.
+    let steps: Vec<(String, Step)> = robot
+        .base
+        .snapshot()
+        .supervision
+        .into_iter()
+        .map(|s| (s.instance, s.step))
+        .collect();
+    assert_eq!(
+        steps,
+        [
+            (MOTION.to_owned(), Step::Failed),
+            (MOTION.to_owned(), Step::Restarted)
+        ]
+    );
+    assert_eq!(robot.base.state(), State::Running);
+    assert_eq!(robot.robot.state(), State::Running);
+    let above = robot.robot.snapshot().supervision;
+    assert!(!above.iter().any(|s| s.instance == "base"), "{above:?}");
+    // It starts again from `idle` and drives on.
+    let from = distance(&overran);
+    wait_member(
+        &robot,
+        &platform,
+        MOTION,
+        |m| distance(m) > from + 0.05,
+        Duration::from_secs(3),
+    )
+    .expect("moving again");
+    let report = robot.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+#[test]
 fn a_hold_stops_the_platform_and_its_release_drives_on() {
     use coolbot::{Command, MonitorEvent, Value};
     use mobile_base::robot::{MOTION, Robot, Setup};
