@@ -42,7 +42,7 @@ use zenoh::query::{ConsolidationMode, QueryTarget};
 
 use crate::backlog::{Backlog, LostFn};
 use crate::codec;
-use crate::delivery::{DeliverFn, Via};
+use crate::delivery::{DecodeFn, DeliverFn, Via};
 use crate::ledger::{self, InletLedger, OutletLedger};
 use crate::nearby::{
     self, Held, InletParts, InletRings, Inline, Link, Nearby, NewestFn, Queue, SameHost,
@@ -1074,6 +1074,16 @@ struct Counters {
     resets: ErasedInput,
 }
 
+/// What [`deliverer`] makes for a key: its delivery of Zenoh's payloads, the same
+/// delivery of bytes this process holds (a ring's), the key's ledger, and what the
+/// rings' gates read of the stream.
+struct Deliverer {
+    deliver: DeliverFn,
+    decode: DecodeFn,
+    ledger: Arc<InletLedger>,
+    newest: NewestFn,
+}
+
 /// What delivers a bridge key's messages on `output` (strict decoding of payloads of
 /// at most `max_payload` bytes, longer ones refused before they are copied, lent
 /// when in shared memory and counted in `shared`; the ledger's count of numbers,
@@ -1085,7 +1095,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
     shared: Arc<crate::shm::Counters>,
     key: String,
     max_payload: usize,
-) -> (DeliverFn, Arc<InletLedger>, NewestFn) {
+) -> Deliverer {
     let network = Arc::new(counters.network);
     let counted = Arc::clone(&network);
     let lost_key = key.clone();
@@ -1117,9 +1127,14 @@ fn deliverer<T: Packet + DeserializeOwned>(
         let delivered = Arc::clone(&delivered);
         Arc::new(move |epoch| lock(&delivered).stream(epoch))
     };
-    let deliver: DeliverFn = match output {
-        InletOutput::Tick(port) => Arc::new(move |payload, via| {
-            let taken = shared.received(payload, MAX_TICK_MESSAGE, |bytes| {
+    let max = match output {
+        InletOutput::Tick(_) => MAX_TICK_MESSAGE,
+        InletOutput::Data(_) | InletOutput::Poster(_) => max_payload,
+    };
+    let decode: DecodeFn = match output {
+        InletOutput::Tick(port) => {
+            let lost = lost.clone();
+            Arc::new(move |bytes, via| {
                 match codec::decode_parts::<Numbered<u64>>(bytes, MAX_TICK_MESSAGE) {
                     Ok((_, _, events)) if events > MAX_EVENTS_PER_MESSAGE => lost(format!(
                         "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
@@ -1134,74 +1149,78 @@ fn deliverer<T: Packet + DeserializeOwned>(
                     }
                     Err(error) => lost(Chain(&error).to_string()),
                 }
-            });
-            if let Err(error) = taken {
-                lost(Chain(&error).to_string());
-            }
-        }),
+            })
+        }
         InletOutput::Data(port) => {
             let delivered = Arc::clone(&delivered);
             // Packets whose delivery would wait go through a backlog: the receiving
             // thread never waits on a full `block` fifo.
             let backlog = Backlog::new(port, &key, lost_many);
-            Arc::new(move |payload, via| {
-                let taken = shared.received(payload, max_payload, |bytes| {
-                    match codec::decode_parts::<Numbered<T>>(bytes, max_payload) {
-                        Ok((epoch, seq, packet)) => {
-                            // Under the lock: the stream, a ring and an answer come on
-                            // different threads; the ledger and `delivered` see them in
-                            // one order, and the one taken as newer is sent last.
-                            let mut delivered = lock(&delivered);
-                            if matches!(via, Via::Stream | Via::Ring) {
-                                gaps.received(epoch, seq);
-                            }
-                            if !delivered.fresh(epoch, seq, via) {
-                                return;
-                            }
-                            if via == Via::Pull {
-                                // To the requester only: the port knows it only
-                                // while this thread answers (no stream to keep in
-                                // order with on a pull inlet).
-                                backlog.send_now(packet);
-                            } else if let Err(refused) = backlog.send(packet, payload.len()) {
+            let lost = lost.clone();
+            Arc::new(move |bytes, via| {
+                match codec::decode_parts::<Numbered<T>>(bytes, max_payload) {
+                    Ok((epoch, seq, packet)) => {
+                        // Under the lock: the stream, a ring and an answer come on
+                        // different threads; the ledger and `delivered` see them in one
+                        // order, and the one taken as newer is sent last.
+                        let mut delivered = lock(&delivered);
+                        if matches!(via, Via::Stream | Via::Ring) {
+                            gaps.received(epoch, seq);
+                        }
+                        if !delivered.fresh(epoch, seq, via) {
+                            return;
+                        }
+                        if via == Via::Pull {
+                            // To the requester only: the port knows it only while this
+                            // thread answers (no stream to keep in order with on a pull
+                            // inlet).
+                            backlog.send_now(packet);
+                        } else {
+                            let len = bytes.iter().map(|part| part.len()).sum();
+                            if let Err(refused) = backlog.send(packet, len) {
                                 lost(Chain(&refused).to_string());
                             }
                         }
-                        Err(error) => lost(Chain(&error).to_string()),
                     }
-                });
-                if let Err(error) = taken {
-                    lost(Chain(&error).to_string());
+                    Err(error) => lost(Chain(&error).to_string()),
                 }
             })
         }
         InletOutput::Poster(port) => {
             let newest = Mutex::new(None::<(u64, u64)>);
-            Arc::new(move |payload, _via| {
-                let taken =
-                    shared.received(payload, max_payload, |bytes| {
-                        match codec::decode_parts::<Posted<T>>(bytes, max_payload) {
-                            Ok((epoch, seq, value)) => {
-                                let mut newest = lock(&newest);
-                                let newer = match *newest {
-                                    Some((e, s)) => e != epoch || seq > s,
-                                    None => true,
-                                };
-                                if newer {
-                                    *newest = Some((epoch, seq));
-                                    port.post(value);
-                                }
-                            }
-                            Err(error) => lost(Chain(&error).to_string()),
+            let lost = lost.clone();
+            Arc::new(move |bytes, _via| {
+                match codec::decode_parts::<Posted<T>>(bytes, max_payload) {
+                    Ok((epoch, seq, value)) => {
+                        let mut newest = lock(&newest);
+                        let newer = match *newest {
+                            Some((e, s)) => e != epoch || seq > s,
+                            None => true,
+                        };
+                        if newer {
+                            *newest = Some((epoch, seq));
+                            port.post(value);
                         }
-                    });
-                if let Err(error) = taken {
-                    lost(Chain(&error).to_string());
+                    }
+                    Err(error) => lost(Chain(&error).to_string()),
                 }
             })
         }
     };
-    (deliver, ledger, newest)
+    let deliver: DeliverFn = {
+        let decode = Arc::clone(&decode);
+        Arc::new(move |payload, via| {
+            if let Err(error) = shared.received(payload, max, |bytes| decode(bytes, via)) {
+                lost(Chain(&error).to_string());
+            }
+        })
+    };
+    Deliverer {
+        deliver,
+        decode,
+        ledger,
+        newest,
+    }
 }
 
 /// A proxy's output (`crate::place`): `ports` with a typed output of `kind` added,
@@ -1235,7 +1254,9 @@ pub(crate) fn proxy_output<T: Packet + DeserializeOwned>(
         network: losses.clone(),
         resets: losses,
     };
-    let (deliver, ledger, _) = deliverer(
+    let Deliverer {
+        deliver, ledger, ..
+    } = deliverer(
         output,
         counters,
         node.shared_memory_counters(),
@@ -1373,7 +1394,12 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             }
             _ => None,
         };
-        let (deliver, ledger, newest) = deliverer(
+        let Deliverer {
+            deliver,
+            decode,
+            ledger,
+            newest,
+        } = deliverer(
             output,
             counters,
             node.shared_memory_counters(),
@@ -1384,7 +1410,7 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             InletRings::new(InletParts {
                 key: key.clone(),
                 answers_on: format!("{key}/@ring/{}/{name}", node.name()),
-                deliver: Arc::clone(&deliver),
+                decode,
                 newest,
                 consumer,
                 counters: node.shared_memory_counters(),
@@ -1534,7 +1560,7 @@ impl Automaton for Inlet {
 
 #[cfg(test)]
 mod tests {
-    use super::{ANSWER_AHEAD, Counters, Delivered, InletOutput, Via, deliverer};
+    use super::{ANSWER_AHEAD, Counters, Delivered, Deliverer, InletOutput, Via, deliverer};
     use coolbot::port::{DataOut, InputPort, TickIn};
     use std::sync::Arc;
     use zenoh::bytes::ZBytes;
@@ -1554,7 +1580,7 @@ mod tests {
         let network = TickIn::new();
         let resets = TickIn::new();
         let out = DataOut::<Vec<u8>>::new();
-        let (deliver, _ledger, _) = deliverer(
+        let Deliverer { deliver, .. } = deliverer(
             InletOutput::Data(out),
             Counters {
                 network: network.erased(),

@@ -10,6 +10,12 @@ use zenoh::bytes::ZBytes;
 /// as Zenoh holds it, and checks its length before copying or decoding it.
 pub(crate) type DeliverFn = Arc<dyn Fn(&ZBytes, Via) + Send + Sync>;
 
+/// What decodes and delivers one message this process already holds, its parts in
+/// order: what a [`DeliverFn`] calls once it has taken Zenoh's payload apart, and what
+/// a ring's messages go to directly (no payload made for them). It checks the length
+/// against its bound before decoding.
+pub(crate) type DecodeFn = Arc<dyn Fn(&[&[u8]], Via) + Send + Sync>;
+
 /// How a message reached an inlet: on the key's stream or a ring (numbered, counted
 /// by the ledger), or as the answer to a query (the current value of a `last` or poster
 /// outlet, or a pull), which the ledger does not count.

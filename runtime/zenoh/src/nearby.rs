@@ -42,10 +42,9 @@ use coolbot::ring::{Ring, RingAddress, RingWriter, WriteError};
 use coolbot::{BellAddress, Chain, ConsumerBell, Packet, RemoteBell, Source, SourceGuard};
 use serde::{Deserialize, Serialize};
 use zenoh::Wait;
-use zenoh::bytes::ZBytes;
 
 use crate::Error;
-use crate::delivery::{DeliverFn, Via};
+use crate::delivery::{DecodeFn, Via};
 use crate::ledger::{self, Sent};
 use crate::tally::Tally;
 
@@ -644,7 +643,9 @@ pub(crate) struct InletParts {
     /// Where it answers: `K/@ring/<node>/<name>` (under its node's name, as its
     /// acknowledgments: access rules let a node answer only under its own).
     pub(crate) answers_on: String,
-    pub(crate) deliver: DeliverFn,
+    /// The inlet's delivery of a message this process holds (a ring's is copied out
+    /// of the ring before it is handed on).
+    pub(crate) decode: DecodeFn,
     pub(crate) newest: NewestFn,
     /// The consumer's doorbell (the one component the inlet's output feeds).
     pub(crate) consumer: Box<dyn Fn() -> Option<ConsumerBell> + Send + Sync>,
@@ -781,7 +782,7 @@ impl InletRings {
         let address = ring.address().ok_or("the ring has no address")?;
         let source = Arc::new(RingSource {
             ring: Mutex::new(ring),
-            deliver: Arc::clone(&parts.deliver),
+            decode: Arc::clone(&parts.decode),
             newest: Arc::clone(&parts.newest),
             writer,
             gate: Mutex::new(Gate::Closed {
@@ -837,7 +838,7 @@ enum Gate {
 /// One outlet's ring, drained by the consumer's thread.
 struct RingSource {
     ring: Mutex<Ring>,
-    deliver: DeliverFn,
+    decode: DecodeFn,
     newest: NewestFn,
     /// The outlet's bell, rung when it waits for room and when the ring closes.
     writer: RemoteBell,
@@ -926,7 +927,7 @@ impl Source for RingSource {
                 // Counted before the consumer can have it. A full `block` fifo is
                 // handled by the delivery as for the key: the inlet's backlog.
                 self.counters.ring_taken(1);
-                (self.deliver)(&ZBytes::from(bytes.to_vec()), Via::Ring);
+                (self.decode)(&[bytes], Via::Ring);
                 true
             })
         }));
