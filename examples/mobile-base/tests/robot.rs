@@ -440,7 +440,7 @@ fn a_motion_controller_past_its_max_response_is_restarted_and_the_robot_drives_o
     assert_eq!(robot.robot.state(), State::Running);
     let above = robot.robot.snapshot().supervision;
     assert!(!above.iter().any(|s| s.instance == "base"), "{above:?}");
-    // It starts again from `idle` and drives on.
+    // It starts again in `idle` and drives on.
     let from = distance(&overran);
     wait_member(
         &robot,
@@ -450,6 +450,43 @@ fn a_motion_controller_past_its_max_response_is_restarted_and_the_robot_drives_o
         Duration::from_secs(3),
     )
     .expect("moving again");
+
+    // Two more hangs within 10 s: restarted each time (`limit 3 in 10s`).
+    for overruns in 2..=3 {
+        platform.hiccup(Duration::from_millis(30));
+        wait_member(
+            &robot,
+            &platform,
+            MOTION,
+            |m| m.overruns == overruns && m.state == State::Running,
+            Duration::from_secs(2),
+        )
+        .expect("restarted again");
+    }
+    assert_eq!(robot.base.state(), State::Running);
+    // The fourth is beyond the budget: it propagates, and the base fails.
+    platform.hiccup(Duration::from_millis(30));
+    let base = robot.instance(mobile_base::robot::BASE).expect("the base");
+    step_until(
+        &platform,
+        &base,
+        |m| m.state == State::RunningError,
+        Duration::from_secs(2),
+    )
+    .expect("the fourth failure propagates");
+    let steps: Vec<Step> = robot
+        .base
+        .snapshot()
+        .supervision
+        .into_iter()
+        .filter(|s| s.instance == MOTION)
+        .map(|s| s.step)
+        .collect();
+    let mut expected: Vec<Step> = (0..3)
+        .flat_map(|_| [Step::Failed, Step::Restarted])
+        .collect();
+    expected.extend([Step::Failed, Step::Propagated]);
+    assert_eq!(steps, expected);
     let report = robot.shutdown();
     assert!(report.clean(), "{report:?}");
 }

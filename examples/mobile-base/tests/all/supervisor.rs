@@ -138,3 +138,33 @@ fn hold_stops_the_base_and_suspends_the_motion_controller() {
         .unwrap();
     assert_eq!(h.user_state(), Some(UserState::Stopped));
 }
+
+#[test]
+fn a_motion_controller_failing_while_degraded_is_left_to_its_restart_policy() {
+    let mut h = harness();
+    h.instances()
+        .ranges()
+        .set_state(State::RunningError)
+        .unwrap();
+    assert_eq!(h.user_state(), Some(UserState::Degraded));
+    h.take_commands();
+    // The motion controller fails while the substitute stands in: `on error motion:
+    // restart` brings it back, and the supervisor stays where it is, commanding
+    // nothing (a stuck controller would refuse every command).
+    h.instances()
+        .motion()
+        .set_state(State::RunningError)
+        .unwrap();
+    assert_eq!(h.user_state(), Some(UserState::Degraded));
+    assert!(h.take_commands().is_empty());
+    h.instances().motion().set_state(State::Running).unwrap();
+    h.advance(Duration::from_secs(1)).unwrap();
+    assert_eq!(h.user_state(), Some(UserState::Degraded));
+    assert!(h.take_commands().is_empty());
+    // A failed motion task still stops the base.
+    h.instances()
+        .motion()
+        .set_result(coolbot::TaskResult::Fail("wheels".to_owned()))
+        .unwrap();
+    assert_eq!(h.user_state(), Some(UserState::Stopped));
+}
