@@ -361,19 +361,28 @@ impl RingWriter {
         if self.is_closed() {
             return true;
         }
-        #[cfg(target_os = "linux")]
-        {
-            let pid = i32::try_from(self.reader)
-                .ok()
-                .and_then(rustix::process::Pid::from_raw);
-            pid.is_none_or(|pid| {
-                matches!(
-                    rustix::process::test_kill_process(pid),
-                    Err(rustix::io::Errno::SRCH)
-                )
-            })
-        }
-        #[cfg(not(target_os = "linux"))]
+        process_ended(self.reader)
+    }
+}
+
+/// Whether the process `pid` of this host has ended (a system call: a signal 0; a
+/// process of another user counts as running). Never on other platforms than Linux.
+pub fn process_ended(pid: u32) -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        let pid = i32::try_from(pid)
+            .ok()
+            .and_then(rustix::process::Pid::from_raw);
+        pid.is_none_or(|pid| {
+            matches!(
+                rustix::process::test_kill_process(pid),
+                Err(rustix::io::Errno::SRCH)
+            )
+        })
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = pid;
         false
     }
 }

@@ -3,6 +3,7 @@
 //! another node asks ([`instantiate`]), bridges the ports the request names, runs them
 //! and exposes them like any other component of the node.
 
+use crate::locks::lock;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::marker::PhantomData;
 use std::panic::AssertUnwindSafe;
@@ -491,10 +492,6 @@ pub struct AgentStatus {
     /// served meanwhile), once for every request of that owner waiting. An owner
     /// whose token it has heard costs none.
     pub owners_asked: u64,
-}
-
-fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// The refusal of a request that finds the agent stopped.

@@ -13,9 +13,10 @@
 //! a packet beyond is refused, and the inlet counts it lost. The thread starts with
 //! the first packet that has to wait.
 
+use crate::locks::lock;
 use std::collections::VecDeque;
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread::JoinHandle;
 
 use coolbot::Packet;
@@ -84,10 +85,6 @@ struct State<T> {
     sending: bool,
     /// The backlog was dropped: what is left is counted lost.
     closed: bool,
-}
-
-fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 impl<T: Packet, P: Port<T>> Backlog<T, P> {

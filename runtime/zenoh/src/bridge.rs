@@ -21,9 +21,10 @@
 //! `MonitorEvent::Overflow` on the monitoring port of the bridge or of the consumer,
 //! and a `tracing` warning with the reason.
 
+use crate::locks::lock;
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
@@ -86,10 +87,6 @@ const MAX_TICK_MESSAGE: usize = 30;
 /// How long a bridge asks the network for the other ends of its connection when it
 /// is built (the liveliness look-up that checks the cardinality rules).
 const LOOKUP_TIMEOUT: Duration = Duration::from_millis(500);
-
-fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
-}
 
 /// The wire name of an input kind (liveliness tokens, messages).
 fn input_kind_name(kind: InputKind) -> &'static str {

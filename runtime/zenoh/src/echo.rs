@@ -27,9 +27,10 @@
 //! every packet it did not get, and the time it was sent, so that a reader places it
 //! in time however it was batched.
 
+use crate::locks::lock;
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
@@ -301,10 +302,6 @@ impl<T: Packet + Serialize> Echoing for Port<T> {
     fn matched(&self) -> bool {
         self.matched.load(Ordering::Acquire)
     }
-}
-
-fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// A node's echoes: the outputs it echoes and the one thread that publishes them,

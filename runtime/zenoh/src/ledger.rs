@@ -28,10 +28,11 @@
 //! epoch; a message or a report further away is one reset, counted at the inlet's
 //! `resets` input.
 
+use crate::locks::lock;
 use coolbot::Chain;
 use std::collections::HashSet;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering, fence};
-use std::sync::{Arc, Mutex, OnceLock, PoisonError};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::thread::{JoinHandle, Thread};
 use std::time::{Duration, Instant};
 
@@ -93,10 +94,6 @@ pub const LEDGER_TARGET: &str = "coolbot_zenoh::ledger";
 /// The `tracing` target of what an outlet counts lost for an ended inlet (`trace`:
 /// `<key> counted <inlet> from <newest acknowledged> to <end>`).
 pub const OUTLET_LEDGER_TARGET: &str = "coolbot_zenoh::ledger::outlet";
-
-fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
-}
 
 /// An outlet's count of the numbered messages it sent, which its ledger's thread
 /// reads: that thread sleeps while every inlet has acknowledged everything and there

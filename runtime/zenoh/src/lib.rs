@@ -59,6 +59,7 @@ pub mod keys;
 mod lanes;
 mod ledger;
 pub mod limits;
+mod locks;
 mod loopback;
 mod nearby;
 pub mod network;

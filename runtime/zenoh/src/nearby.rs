@@ -33,8 +33,9 @@
 //! producer that ends leaves the consumer its ring, replaced when that outlet asks
 //! again, and bounded in number per inlet.
 
+use crate::locks::lock;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, OnceLock, PoisonError, Weak};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 use std::time::{Duration, Instant};
 
 use coolbot::port::{FifoIn, Intake, UfifoIn};
@@ -223,10 +224,6 @@ pub(crate) struct Nearby<T, Q> {
     /// An answer's ring, opened on Zenoh's thread, adopted by the next send.
     offered: Arc<Mutex<Option<OnRing>>>,
     asking: Arc<AtomicBool>,
-}
-
-fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// What became of a packet offered to the ring.
@@ -818,8 +815,7 @@ impl Entry {
     /// Whether its outlet will not write into it again: the ring broke, or the
     /// outlet's process ended.
     fn ended(&self) -> bool {
-        self.source.broken.load(Ordering::Relaxed)
-            || !std::path::Path::new(&format!("/proc/{}", self.pid)).exists()
+        self.source.broken.load(Ordering::Relaxed) || coolbot::ring::process_ended(self.pid)
     }
 }
 

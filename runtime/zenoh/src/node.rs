@@ -1,9 +1,10 @@
 //! A [`Node`]: one per process, named, holding the Zenoh session; it exposes
 //! components' monitoring and control ports on the network and makes bridges.
 
+use crate::locks::lock;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
@@ -33,10 +34,6 @@ pub enum ControlReply {
         /// Why, as the control port said it.
         reason: String,
     },
-}
-
-fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// The keys of the liveliness tokens under `pattern` (sorted, without duplicates).

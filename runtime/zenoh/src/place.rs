@@ -12,9 +12,10 @@
 //! the node lost is a fault of the proxy within the Zenoh session's lease
 //! ([`crate::peer_config`]'s `lease`).
 
+use crate::locks::lock;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use coolbot::port::{InputPort, TickIn};
@@ -117,10 +118,6 @@ fn clock_time(t: SystemTime) -> String {
         seconds / 60 % 60,
         seconds % 60
     )
-}
-
-fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// Why an instance declared `on "node"` could not be placed, built, commanded, pulled

@@ -15,9 +15,10 @@
 
 pub mod wire;
 
+use crate::locks::lock;
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex};
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use coolbot::InputPort;
@@ -87,10 +88,6 @@ pub enum RosError {
 
 fn zenoh_error(action: &'static str) -> impl FnOnce(zenoh::Error) -> RosError {
     move |source| RosError::Zenoh { action, source }
-}
-
-fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// A Zenoh configuration as rmw_zenoh's default session: client mode, connected to the
