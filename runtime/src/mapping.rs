@@ -161,3 +161,13 @@ impl Drop for Mapping {
         }
     }
 }
+
+/// A number a mapping's header carries so that an opener can tell it from another
+/// mapping at the same place (a descriptor reused after the maker's process ended
+/// and another took its pid): drawn from the standard library's random hasher keys,
+/// the process and the time.
+pub(crate) fn nonce() -> u64 {
+    use std::hash::BuildHasher;
+    std::collections::hash_map::RandomState::new()
+        .hash_one((std::process::id(), std::time::SystemTime::now()))
+}

@@ -96,12 +96,6 @@ fn words_for(len: usize) -> usize {
     1 + len.div_ceil(8)
 }
 
-fn nonce() -> u64 {
-    use std::hash::BuildHasher;
-    std::collections::hash_map::RandomState::new()
-        .hash_one((std::process::id(), std::time::SystemTime::now()))
-}
-
 /// The reading end, in the process that made it. Closed when dropped: the writer
 /// sees it ([`RingWriter::is_gone`]).
 pub struct Ring {
@@ -128,7 +122,7 @@ impl Ring {
             .clamp(MIN_CAPACITY, MAX_CAPACITY)
             .next_power_of_two();
         let shared = Mapping::create("coolbot-ring", DATA * 8 + capacity)?;
-        let nonce = nonce();
+        let nonce = crate::mapping::nonce();
         let words = shared.u64s();
         words[NONCE_AT].store(nonce, Ordering::Relaxed);
         words[CAPACITY_AT].store(capacity as u64, Ordering::Relaxed);

@@ -264,11 +264,7 @@ mod mapped {
 
     fn make() -> Option<Mapping> {
         let shared = crate::mapping::Mapping::create("coolbot-bells", BYTES).ok()?;
-        let nonce = {
-            use std::hash::BuildHasher;
-            std::collections::hash_map::RandomState::new()
-                .hash_one((std::process::id(), std::time::SystemTime::now()))
-        };
+        let nonce = crate::mapping::nonce();
         let words = shared.u32s();
         words[0].store(MAGIC, Ordering::SeqCst);
         words[2].store(nonce as u32, Ordering::SeqCst);
