@@ -57,6 +57,25 @@ fn step(platform: &Platform) {
     platform.advance(STEP).expect("the robot settles");
 }
 
+/// The robot started on `platform` with noiseless sensors (seed 1).
+fn quiet_robot(platform: &Arc<Platform>) -> mobile_base::robot::Robot {
+    let setup = mobile_base::robot::Setup {
+        noise: Some(0.0),
+        seed: 1,
+        ..mobile_base::robot::Setup::default()
+    };
+    mobile_base::robot::Robot::start(platform, &setup).expect("the robot starts")
+}
+
+/// The distance the motion controller has driven (its `distance`), from its monitor.
+fn driven(m: &Monitor) -> f64 {
+    m.variables
+        .iter()
+        .find(|(name, _)| name == "distance")
+        .and_then(|(_, value)| value.to_json().as_f64())
+        .unwrap_or(0.0)
+}
+
 /// Advances the platform's clock [`STEP`] by step until `pred` holds for the monitor
 /// of `handle` (read from its own monitoring port after each step), for at most
 /// `limit` of virtual time, and returns that monitor.
@@ -313,15 +332,10 @@ fn wait_member(
 #[test]
 fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
     use coolbot::{Command, Controllable};
-    use mobile_base::robot::{MOTION, Robot, Setup};
+    use mobile_base::robot::MOTION;
 
     let platform = platform(None);
-    let setup = Setup {
-        noise: Some(0.0),
-        seed: 1,
-        ..Setup::default()
-    };
-    let robot = Robot::start(&platform, &setup).expect("the robot starts");
+    let robot = quiet_robot(&platform);
     let moving = |m: &Monitor| {
         m.state == State::Running
             && m.variables.iter().any(|(name, value)| {
@@ -361,13 +375,7 @@ fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
     assert_eq!(after.error, None);
     // Moving on: the odometry gets past where the platform was just now.
     let distance = platform.truth().distance;
-    let odometry = |m: &Monitor| {
-        m.variables
-            .iter()
-            .find(|(name, _)| name == "distance")
-            .and_then(|(_, value)| value.to_json().as_f64())
-            .unwrap_or(0.0)
-    };
+    let odometry = driven;
     wait_member(
         &robot,
         &platform,
@@ -384,22 +392,11 @@ fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
 
 #[test]
 fn a_motion_controller_past_its_max_response_is_restarted_and_the_robot_drives_on() {
-    use mobile_base::robot::{MOTION, Robot, Setup};
+    use mobile_base::robot::MOTION;
 
     let platform = platform(None);
-    let setup = Setup {
-        noise: Some(0.0),
-        seed: 1,
-        ..Setup::default()
-    };
-    let robot = Robot::start(&platform, &setup).expect("the robot starts");
-    let distance = |m: &Monitor| {
-        m.variables
-            .iter()
-            .find(|(name, _)| name == "distance")
-            .and_then(|(_, value)| value.to_json().as_f64())
-            .unwrap_or(0.0)
-    };
+    let robot = quiet_robot(&platform);
+    let distance = driven;
     wait_member(
         &robot,
         &platform,
@@ -499,13 +496,7 @@ fn a_hold_stops_the_platform_and_its_release_drives_on() {
     let platform = platform(None);
     let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
     let motion = robot.instance("base.motion").expect("base.motion");
-    let odometry = |m: &Monitor| {
-        m.variables
-            .iter()
-            .find(|(name, _)| name == "distance")
-            .and_then(|(_, value)| value.to_json().as_f64())
-            .unwrap_or(0.0)
-    };
+    let odometry = driven;
     wait_member(
         &robot,
         &platform,
