@@ -104,30 +104,118 @@ pub const DEGRADED_MAX_SPEED: f64 = 0.25;
 /// generated typed handle (`cx.instances.motion()`): `stopped` suspends it, so the
 /// platform stands still; `operating` resumes it if it was suspended; `degraded`
 /// lowers its controllable `max_speed` to [`DEGRADED_MAX_SPEED`] and its exit puts
-/// back the limit it found. The periodic sections have nothing to do: whoever
-/// watches the base's instances reads their own monitoring ports
-/// ([`Robot::instance`]).
+/// back the limit it found. A command the controller cannot take while its restart
+/// policy brings it back (`Refused::Stuck`, `Refused::Busy`) does not fail the
+/// section: it is owed, and the periodic sections give it again until it is taken.
 #[derive(Debug, Default)]
 pub struct BaseSupervisor {
     /// The motion controller's `max_speed` before `degraded` lowered it.
     max_speed: Option<f64>,
+    /// The commands the motion controller could not take yet (it was inside a
+    /// section past its `max_response`, waiting for its restart, or busy), oldest
+    /// first, at most one of each kind (a state, a speed limit): given again by every
+    /// periodic section until they are taken; a later command of a kind replaces the
+    /// one owed.
+    owed: Vec<MotionCommand>,
+}
+
+/// A command of the base's supervisor to its motion controller.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum MotionCommand {
+    Run,
+    Suspend,
+    SetMaxSpeed(f64),
+}
+
+impl MotionCommand {
+    /// Whether `self` and `other` set the same thing (the state, or the limit).
+    fn same_kind(self, other: MotionCommand) -> bool {
+        matches!(self, MotionCommand::SetMaxSpeed(_))
+            == matches!(other, MotionCommand::SetMaxSpeed(_))
+    }
+}
+
+/// What the generated handle of a base's motion controller takes (the same for
+/// `MobileBase` and `IsolatedBase`).
+trait MotionControl {
+    fn command(&mut self, command: MotionCommand) -> Result<(), coolbot::CommandError>;
+}
+
+impl BaseSupervisor {
+    /// Give `command` to the motion controller (after any owed before it). Refused
+    /// because the controller cannot take a command now (`Refused::Stuck`,
+    /// `Refused::Busy`: its restart policy is bringing it back), it is owed and given
+    /// again later; any other refusal fails the section.
+    fn give(
+        &mut self,
+        motion: &mut impl MotionControl,
+        command: MotionCommand,
+    ) -> coolbot::SectionResult {
+        self.owed.retain(|owed| !owed.same_kind(command));
+        self.owed.push(command);
+        self.settle(motion)
+    }
+
+    /// Give the owed commands in order, up to the first the controller cannot take
+    /// yet (periodic sections).
+    fn settle(&mut self, motion: &mut impl MotionControl) -> coolbot::SectionResult {
+        while let Some(&command) = self.owed.first() {
+            match motion.command(command) {
+                Ok(()) => {
+                    self.owed.remove(0);
+                }
+                Err(error)
+                    if matches!(
+                        error.reason,
+                        coolbot::Refused::Stuck | coolbot::Refused::Busy { .. }
+                    ) =>
+                {
+                    tracing::warn!("the motion controller will be commanded again: {error}");
+                    return Ok(());
+                }
+                Err(error) => {
+                    self.owed.remove(0);
+                    return Err(error.into());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether `command` is owed.
+    fn owes(&self, command: MotionCommand) -> bool {
+        self.owed.contains(&command)
+    }
 }
 
 /// `BaseSupervisor` for the generated `Supervisor` of a base compound (`MobileBase`,
 /// `IsolatedBase`: the same states and sections).
 macro_rules! base_supervisor {
     ($base:ident) => {
+        impl MotionControl for $base::MotionInstance<'_> {
+            fn command(&mut self, command: MotionCommand) -> Result<(), coolbot::CommandError> {
+                match command {
+                    MotionCommand::Run => self.run(),
+                    MotionCommand::Suspend => self.suspend(),
+                    MotionCommand::SetMaxSpeed(limit) => self.set_max_speed(limit),
+                }
+            }
+        }
+
         impl $base::Supervisor for BaseSupervisor {
             fn operating_entry(&mut self, cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
                 cx.vars.mode = BaseMode::Normal;
-                if cx.view.state(MOTION) == Some(State::Suspended) {
-                    cx.instances.motion().run()?;
+                if self.owes(MotionCommand::Suspend) {
+                    // Never taken: nothing to resume.
+                    self.owed.retain(|owed| *owed != MotionCommand::Suspend);
+                } else if cx.view.state(MOTION) == Some(State::Suspended) {
+                    self.give(&mut cx.instances.motion(), MotionCommand::Run)?;
                 }
                 Ok(())
             }
 
-            fn operating_periodic(&mut self, _cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
-                Ok(())
+            fn operating_periodic(&mut self, cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
+                self.settle(&mut cx.instances.motion())
             }
 
             fn degraded_entry(&mut self, cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
@@ -138,7 +226,10 @@ macro_rules! base_supervisor {
                     .var(MOTION, "max_speed")
                     .and_then(|value| f64::try_from(value).ok());
                 if let Some(limit) = limit.filter(|limit| *limit > DEGRADED_MAX_SPEED) {
-                    cx.instances.motion().set_max_speed(DEGRADED_MAX_SPEED)?;
+                    self.give(
+                        &mut cx.instances.motion(),
+                        MotionCommand::SetMaxSpeed(DEGRADED_MAX_SPEED),
+                    )?;
                     self.max_speed = Some(limit);
                 }
                 Ok(())
@@ -146,25 +237,27 @@ macro_rules! base_supervisor {
 
             fn degraded_exit(&mut self, cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
                 if let Some(limit) = self.max_speed.take() {
-                    cx.instances.motion().set_max_speed(limit)?;
+                    self.give(
+                        &mut cx.instances.motion(),
+                        MotionCommand::SetMaxSpeed(limit),
+                    )?;
                 }
                 Ok(())
             }
 
-            fn degraded_periodic(&mut self, _cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
-                Ok(())
+            fn degraded_periodic(&mut self, cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
+                self.settle(&mut cx.instances.motion())
             }
 
             fn stopped_entry(&mut self, cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
                 cx.vars.mode = BaseMode::Stopped;
                 // The platform moves only when the motion controller's periodic section
                 // drives it: suspended, it stands still.
-                cx.instances.motion().suspend()?;
-                Ok(())
+                self.give(&mut cx.instances.motion(), MotionCommand::Suspend)
             }
 
-            fn stopped_periodic(&mut self, _cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
-                Ok(())
+            fn stopped_periodic(&mut self, cx: &mut $base::Cx<'_>) -> coolbot::SectionResult {
+                self.settle(&mut cx.instances.motion())
             }
         }
     };

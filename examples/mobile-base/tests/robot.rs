@@ -375,12 +375,11 @@ fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
     assert_eq!(after.error, None);
     // Moving on: the odometry gets past where the platform was just now.
     let distance = platform.truth().distance;
-    let odometry = driven;
     wait_member(
         &robot,
         &platform,
         MOTION,
-        |m| odometry(m) > distance + 0.05,
+        |m| driven(m) > distance + 0.05,
         Duration::from_secs(3),
     )
     .expect("moving again");
@@ -391,17 +390,16 @@ fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
 }
 
 #[test]
-fn a_motion_controller_past_its_max_response_is_restarted_and_the_robot_drives_on() {
+fn a_motion_controller_past_its_max_response_is_restarted_until_its_budget_is_spent() {
     use mobile_base::robot::MOTION;
 
     let platform = platform(None);
     let robot = quiet_robot(&platform);
-    let distance = driven;
     wait_member(
         &robot,
         &platform,
         MOTION,
-        |m| m.state == State::Running && distance(m) > 0.05,
+        |m| m.state == State::Running && driven(m) > 0.05,
         Duration::from_secs(3),
     )
     .expect("the base gets going");
@@ -438,12 +436,12 @@ fn a_motion_controller_past_its_max_response_is_restarted_and_the_robot_drives_o
     let above = robot.robot.snapshot().supervision;
     assert!(!above.iter().any(|s| s.instance == "base"), "{above:?}");
     // It starts again in `idle` and drives on.
-    let from = distance(&overran);
+    let from = driven(&overran);
     wait_member(
         &robot,
         &platform,
         MOTION,
-        |m| distance(m) > from + 0.05,
+        |m| driven(m) > from + 0.05,
         Duration::from_secs(3),
     )
     .expect("moving again");
@@ -463,10 +461,9 @@ fn a_motion_controller_past_its_max_response_is_restarted_and_the_robot_drives_o
     assert_eq!(robot.base.state(), State::Running);
     // The fourth is beyond the budget: it propagates, and the base fails.
     platform.hiccup(Duration::from_millis(30));
-    let base = robot.instance(mobile_base::robot::BASE).expect("the base");
     step_until(
         &platform,
-        &base,
+        &robot.base,
         |m| m.state == State::RunningError,
         Duration::from_secs(2),
     )
@@ -496,12 +493,11 @@ fn a_hold_stops_the_platform_and_its_release_drives_on() {
     let platform = platform(None);
     let robot = Robot::start(&platform, &Setup::default()).expect("the robot starts");
     let motion = robot.instance("base.motion").expect("base.motion");
-    let odometry = driven;
     wait_member(
         &robot,
         &platform,
         MOTION,
-        |m| odometry(m) > 0.05,
+        |m| driven(m) > 0.05,
         Duration::from_secs(5),
     )
     .expect("the base gets going");
@@ -570,7 +566,7 @@ fn a_hold_stops_the_platform_and_its_release_drives_on() {
         &robot,
         &platform,
         MOTION,
-        |m| odometry(m) > held_at + 0.05,
+        |m| driven(m) > held_at + 0.05,
         Duration::from_secs(5),
     )
     .expect("moving again");

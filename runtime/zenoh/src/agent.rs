@@ -8,7 +8,7 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 use std::marker::PhantomData;
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -201,7 +201,7 @@ fn check_levels(requested: &[String]) -> Result<(), String> {
 fn levels(requested: &[String]) -> Result<&'static [&'static str], String> {
     check_levels(requested)?;
     static KNOWN: Mutex<Vec<&'static [&'static str]>> = Mutex::new(Vec::new());
-    let mut known = KNOWN.lock().unwrap_or_else(PoisonError::into_inner);
+    let mut known = lock(&KNOWN);
     if let Some(list) = known.iter().find(|list| same_levels(list, requested)) {
         return Ok(list);
     }

@@ -10,8 +10,9 @@
 //! the lanes, the others when a request finds every running thread busy. Dropping
 //! [`Lanes`] serves what is queued, then joins the threads.
 
+use crate::locks::lock;
 use std::collections::{HashMap, VecDeque};
-use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread::JoinHandle;
 
 use crate::Error;
@@ -74,10 +75,6 @@ struct State<T> {
     threads: Vec<JoinHandle<()>>,
     idle: usize,
     stopping: bool,
-}
-
-fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 impl<T: Send + 'static> Lanes<T> {

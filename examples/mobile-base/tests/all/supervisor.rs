@@ -168,3 +168,53 @@ fn a_motion_controller_failing_while_degraded_is_left_to_its_restart_policy() {
         .unwrap();
     assert_eq!(h.user_state(), Some(UserState::Stopped));
 }
+
+#[test]
+fn a_command_the_motion_controller_cannot_take_yet_is_given_again_until_it_is() {
+    let mut h = harness();
+    h.instances().motion().set_max_speed(0.5).unwrap();
+    // The motion controller is stuck in a section past its `max_response` (its
+    // restart policy will bring it back) when the range server fails: `degraded`'s
+    // entry cannot lower its limit, and does not fail for that.
+    h.inner()
+        .refuse_next("motion", coolbot::Refused::Stuck)
+        .unwrap();
+    h.instances()
+        .ranges()
+        .set_state(State::RunningError)
+        .unwrap();
+    assert_eq!(h.user_state(), Some(UserState::Degraded));
+    assert_eq!(h.take_commands(), [set_max_speed(DEGRADED_MAX_SPEED)]);
+    assert_eq!(h.inner().state(), State::Running);
+    assert_eq!(
+        h.instances()
+            .motion()
+            .monitor()
+            .unwrap()
+            .variables
+            .iter()
+            .find(|(name, _)| name == "max_speed")
+            .map(|(_, value)| value.clone()),
+        Some(Value::from(0.5))
+    );
+    // Still refused at the next periodic section, taken at the one after.
+    h.inner()
+        .refuse_next("motion", coolbot::Refused::Stuck)
+        .unwrap();
+    h.advance(Duration::from_millis(100)).unwrap();
+    assert_eq!(h.take_commands(), [set_max_speed(DEGRADED_MAX_SPEED)]);
+    h.advance(Duration::from_millis(100)).unwrap();
+    assert_eq!(h.take_commands(), [set_max_speed(DEGRADED_MAX_SPEED)]);
+    h.advance(Duration::from_millis(100)).unwrap();
+    assert!(h.take_commands().is_empty());
+    // Any other refusal still fails the supervisor's section.
+    h.inner()
+        .refuse_next("motion", coolbot::Refused::QueueFull)
+        .unwrap();
+    h.instances().ranges().set_state(State::Running).unwrap();
+    h.instances()
+        .ranges()
+        .set_user_state(Some(range_server::UserState::Streaming.name()))
+        .unwrap();
+    assert_eq!(h.inner().state(), State::RunningError);
+}

@@ -30,9 +30,8 @@
 //! write, one whose process ended within 20 ms of writing (or when the ring is
 //! full): the stream goes back to the key (the messages left in the ring are lost,
 //! and counted as a gone inlet's are: `crate::ledger`), and the outlet asks again
-//! later. A
-//! producer that ends leaves the consumer its ring, replaced when that outlet asks
-//! again, and bounded in number per inlet.
+//! later. A producer that ends leaves the consumer its ring, replaced when that
+//! outlet asks again, and bounded in number per inlet.
 //!
 //! `outlet` is the producer's side (asking, writing, falling back to the key),
 //! `inlet` the consumer's (the rings, their gates, the answers), `wire` what they
