@@ -76,6 +76,19 @@ fn driven(m: &Monitor) -> f64 {
         .unwrap_or(0.0)
 }
 
+/// Waits (at most 3 s of the platform's clock) until the motion controller has driven
+/// 5 cm past `from` (m).
+fn drives_on(robot: &mobile_base::robot::Robot, platform: &Platform, from: f64) {
+    wait_member(
+        robot,
+        platform,
+        mobile_base::robot::MOTION,
+        |m| driven(m) > from + 0.05,
+        Duration::from_secs(3),
+    )
+    .expect("moving again");
+}
+
 /// Advances the platform's clock [`STEP`] by step until `pred` holds for the monitor
 /// of `handle` (read from its own monitoring port after each step), for at most
 /// `limit` of virtual time, and returns that monitor.
@@ -374,15 +387,7 @@ fn a_pause_trips_the_platform_watchdog_and_the_retry_plan_recovers() {
     assert_eq!(after.state, State::Running);
     assert_eq!(after.error, None);
     // Moving on: the odometry gets past where the platform was just now.
-    let distance = platform.truth().distance;
-    wait_member(
-        &robot,
-        &platform,
-        MOTION,
-        |m| driven(m) > distance + 0.05,
-        Duration::from_secs(3),
-    )
-    .expect("moving again");
+    drives_on(&robot, &platform, platform.truth().distance);
     // Nothing failed: the base's supervisor took no step.
     assert!(robot.base.snapshot().supervision.is_empty());
     let report = robot.shutdown();
@@ -436,15 +441,7 @@ fn a_motion_controller_past_its_max_response_is_restarted_until_its_budget_is_sp
     let above = robot.robot.snapshot().supervision;
     assert!(!above.iter().any(|s| s.instance == "base"), "{above:?}");
     // It starts again in `idle` and drives on.
-    let from = driven(&overran);
-    wait_member(
-        &robot,
-        &platform,
-        MOTION,
-        |m| driven(m) > from + 0.05,
-        Duration::from_secs(3),
-    )
-    .expect("moving again");
+    drives_on(&robot, &platform, driven(&overran));
 
     // Two more hangs within 10 s: restarted each time (`limit 3 in 10s`).
     for overruns in 2..=3 {

@@ -48,6 +48,26 @@ fn set_max_speed(speed: f64) -> (String, Command) {
     )
 }
 
+/// The `max_speed` the motion controller's stand-in holds.
+fn motion_max_speed(h: &mut Harness) -> Option<Value> {
+    h.instances()
+        .motion()
+        .monitor()
+        .unwrap()
+        .variables
+        .into_iter()
+        .find(|(name, _)| name == "max_speed")
+        .map(|(_, value)| value)
+}
+
+/// The motion controller's task fails (`motion.result == fail`).
+fn fail_motion_task(h: &mut Harness) {
+    h.instances()
+        .motion()
+        .set_result(coolbot::TaskResult::Fail("wheels".to_owned()))
+        .unwrap();
+}
+
 #[test]
 fn the_base_degrades_when_its_range_server_fails_and_recovers_when_it_streams() {
     let mut h = harness();
@@ -78,14 +98,9 @@ fn the_base_degrades_when_its_range_server_fails_and_recovers_when_it_streams() 
     assert_eq!(h.take_commands(), [set_max_speed(DEGRADED_MAX_SPEED)]);
     assert_eq!(h.variable("faults"), Some(Value::from(1_u32)));
     // The stand-in took the command as the motion controller would.
-    let motion = h.instances().motion().monitor().unwrap();
-    let max_speed = motion
-        .variables
-        .iter()
-        .find(|(name, _)| name == "max_speed");
     assert_eq!(
-        max_speed.map(|(_, value)| value),
-        Some(&Value::from(DEGRADED_MAX_SPEED))
+        motion_max_speed(&mut h),
+        Some(Value::from(DEGRADED_MAX_SPEED))
     );
 
     // Periodic sections run on the virtual clock and command nothing.
@@ -132,10 +147,7 @@ fn hold_stops_the_base_and_suspends_the_motion_controller() {
         )]
     );
     // A failed motion task stops it too (`motion.result == fail`).
-    h.instances()
-        .motion()
-        .set_result(coolbot::TaskResult::Fail("wheels".to_owned()))
-        .unwrap();
+    fail_motion_task(&mut h);
     assert_eq!(h.user_state(), Some(UserState::Stopped));
 }
 
@@ -162,10 +174,7 @@ fn a_motion_controller_failing_while_degraded_is_left_to_its_restart_policy() {
     assert_eq!(h.user_state(), Some(UserState::Degraded));
     assert!(h.take_commands().is_empty());
     // A failed motion task still stops the base.
-    h.instances()
-        .motion()
-        .set_result(coolbot::TaskResult::Fail("wheels".to_owned()))
-        .unwrap();
+    fail_motion_task(&mut h);
     assert_eq!(h.user_state(), Some(UserState::Stopped));
 }
 
@@ -186,17 +195,7 @@ fn a_command_the_motion_controller_cannot_take_yet_is_given_again_until_it_is() 
     assert_eq!(h.user_state(), Some(UserState::Degraded));
     assert_eq!(h.take_commands(), [set_max_speed(DEGRADED_MAX_SPEED)]);
     assert_eq!(h.inner().state(), State::Running);
-    assert_eq!(
-        h.instances()
-            .motion()
-            .monitor()
-            .unwrap()
-            .variables
-            .iter()
-            .find(|(name, _)| name == "max_speed")
-            .map(|(_, value)| value.clone()),
-        Some(Value::from(0.5))
-    );
+    assert_eq!(motion_max_speed(&mut h), Some(Value::from(0.5)));
     // Still refused at the next periodic section, taken at the one after.
     h.inner()
         .refuse_next("motion", coolbot::Refused::Stuck)
