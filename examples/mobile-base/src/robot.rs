@@ -170,7 +170,13 @@ impl BaseSupervisor {
                         coolbot::Refused::Stuck | coolbot::Refused::Busy { .. }
                     ) =>
                 {
-                    tracing::warn!("the motion controller will be commanded again: {error}");
+                    // Each periodic section while the controller restarts: one line
+                    // per interval, with the count of those held back.
+                    coolbot::limited!("the motion controller owed a command", |held| {
+                        tracing::warn!(
+                            "the motion controller will be commanded again: {error}{held}"
+                        )
+                    });
                     return Ok(());
                 }
                 Err(error) => {

@@ -144,6 +144,15 @@ impl<T: Packet> DataOut<T> {
         would_wait(&self.inner.sinks.read())
     }
 
+    /// Call `watcher` after each change of this output's connections from now on (a
+    /// connection made, removed, or moved to another input, as a substitution does),
+    /// on the thread that made the change once it is made, with no lock of the
+    /// output held: what keeps a view of where the output goes (its
+    /// [`DataOut::consumer_bell`]) looks again.
+    pub fn on_change(&self, watcher: impl Fn() + Send + Sync + 'static) {
+        self.inner.sinks.watch(Arc::new(watcher));
+    }
+
     /// The doorbell of the component this output feeds, if it feeds exactly one input
     /// directly (no converter, no compound's exported port between them): what
     /// another process on this host rings after it leaves packets for a

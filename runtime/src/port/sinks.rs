@@ -69,6 +69,9 @@ impl Drop for Idle<'_> {
 /// A snapshot and its version.
 type Versioned<T> = (u64, Arc<[Sink<T>]>);
 
+/// Called after each change of an output's sinks ([`Sinks::watch`]).
+pub(super) type Watcher = Arc<dyn Fn() + Send + Sync>;
+
 /// The sinks of a data output (see the module's doc).
 pub(crate) struct Sinks<T> {
     list: RwLock<Arc<[Sink<T>]>>,
@@ -80,6 +83,9 @@ pub(crate) struct Sinks<T> {
     /// thread whose token is the output's `sender` (a claim that never changes),
     /// read while it delivers, written only when it is not delivering from it.
     owned: UnsafeCell<Option<Versioned<T>>>,
+    /// Told after each change, on the thread that made it, with no lock of the
+    /// sinks held.
+    watchers: Mutex<Vec<Watcher>>,
     /// How many changes found the owner delivering and waited for it.
     #[cfg(test)]
     waited: AtomicU64,
@@ -92,9 +98,15 @@ impl<T: Packet> Sinks<T> {
             version: AtomicU64::new(0),
             busy: AtomicBool::new(false),
             owned: UnsafeCell::new(None),
+            watchers: Mutex::new(Vec::new()),
             #[cfg(test)]
             waited: AtomicU64::new(0),
         }
+    }
+
+    /// Call `watcher` after each change of the snapshot from now on.
+    pub(super) fn watch(&self, watcher: Watcher) {
+        lock(&self.watchers).push(watcher);
     }
 
     /// The snapshot, read-locked: no change goes on while the guard lives.
@@ -135,6 +147,11 @@ impl<T: Packet> Sinks<T> {
         }
         let result = then();
         drop(list);
+        // A copy of the list: a watcher may change these sinks, or add a watcher.
+        let watchers = lock(&self.watchers).clone();
+        for watcher in watchers {
+            watcher();
+        }
         result
     }
 
@@ -623,5 +640,31 @@ mod tests {
         poll_until("the unlink to return", || unlinked.load(Ordering::Acquire));
         changer.join().expect("changer");
         assert_eq!(a.drain().collect::<Vec<u64>>(), [1, 3]);
+    }
+
+    #[test]
+    fn a_watcher_is_told_of_each_change_after_it_is_made_and_may_send() {
+        let rig = rig(None);
+        // What the output feeds, seen by the watcher, and a packet it sends then: the
+        // change is over (no lock of the output held), so the packet goes to the
+        // input the change made.
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        {
+            let (out, seen) = (rig.out.clone(), Arc::clone(&seen));
+            rig.out.on_change(move || {
+                let consumers = out.consumers();
+                lock(&seen).push(consumers);
+                out.send(100 + consumers as u64);
+            });
+        }
+        rig.out.send(1);
+        assert!(lock(&seen).is_empty(), "a send is no change");
+        relink(&rig);
+        assert_eq!(*lock(&seen), [1]);
+        rig.out.erased().unlink(&rig.b.erased());
+        assert_eq!(*lock(&seen), [1, 0]);
+        // Packet 1, queued at `a`, moved to `b` by the relink before the watcher's.
+        assert_eq!(rig.a.drain().count(), 0);
+        assert_eq!(rig.b.drain().collect::<Vec<u64>>(), [1, 101]);
     }
 }

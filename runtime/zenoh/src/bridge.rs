@@ -1380,14 +1380,17 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             network: network.erased(),
             resets: resets.erased(),
         };
-        // The consumer's doorbell, asked when an outlet of this host asks for a ring.
+        // The consumer's doorbell, asked when an outlet of this host asks for a ring;
+        // the output, watched for a change of its consumer.
         let consumer = match &output {
             InletOutput::Data(port) if pull.is_none() && node.same_host() => {
+                let watched = port.clone();
                 let port = port.clone();
-                Some(Box::new(move || port.consumer_bell())
-                    as Box<
-                        dyn Fn() -> Option<coolbot::ConsumerBell> + Send + Sync,
-                    >)
+                Some((
+                    Box::new(move || port.consumer_bell())
+                        as Box<dyn Fn() -> Option<coolbot::ConsumerBell> + Send + Sync>,
+                    watched,
+                ))
             }
             _ => None,
         };
@@ -1403,8 +1406,8 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             key.clone(),
             max_payload,
         );
-        let rings = consumer.map(|consumer| {
-            InletRings::new(InletParts {
+        let rings = consumer.map(|(consumer, watched)| {
+            let rings = InletRings::new(InletParts {
                 key: key.clone(),
                 answers_on: format!("{key}/@ring/{}/{name}", node.name()),
                 decode,
@@ -1412,7 +1415,14 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
                 consumer,
                 counters: node.shared_memory_counters(),
                 replier: node.replier(),
-            })
+            });
+            let follow = Arc::downgrade(&rings);
+            watched.on_change(move || {
+                if let Some(rings) = follow.upgrade() {
+                    rings.follow_consumer();
+                }
+            });
+            rings
         });
         let acks = match pull {
             Some(_) => None,

@@ -55,6 +55,8 @@ struct Entry {
     /// The outlet's process.
     pid: u32,
     source: Arc<RingSource>,
+    /// The consumer's bell the source is on, and where the outlet rings it.
+    bell: BellAddress,
     consumer: RemoteBell,
     _guard: SourceGuard,
 }
@@ -201,10 +203,33 @@ impl InletRings {
             outlet,
             pid: ask.bell.0,
             source,
+            bell,
             consumer: ring_again,
             _guard: guard,
         });
         Ok((address, bell))
+    }
+
+    /// The inlet's output changed its connections (`DataOut::on_change`): a ring on
+    /// the bell of a component the output no longer feeds (a substitution moved the
+    /// connection, or it now feeds several) would wait for that component's thread,
+    /// which may never take from it again. Such rings are handed over on this
+    /// thread, and their outlets go back to the key, then ask again: the answer
+    /// names the new consumer's bell.
+    pub(crate) fn follow_consumer(&self) {
+        let now = (self.parts.consumer)().and_then(|consumer| consumer.address());
+        let moved: Vec<Entry> = {
+            let mut rings = lock(&self.rings);
+            let (kept, moved) = std::mem::take(&mut rings.1)
+                .into_iter()
+                .partition(|entry| Some(entry.bell) == now);
+            rings.1 = kept;
+            moved
+        };
+        for entry in moved {
+            entry.source.hand_over();
+            tracing::debug!(key = %self.parts.key, outlet = %entry.outlet.0, "a ring's consumer changed: its outlet goes back to the key");
+        }
     }
 }
 
@@ -312,9 +337,16 @@ impl Source for RingSource {
         }
         let mut ring = lock(&self.ring);
         let mut gate = lock(&self.gate);
+        self.take(&mut ring, &mut gate);
+    }
+}
+
+impl RingSource {
+    /// Deliver what the gate lets through; a ring that breaks is closed.
+    fn take(&self, ring: &mut Ring, gate: &mut Gate) {
         let taken = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             ring.take(|bytes| {
-                if !self.may_pass(&mut gate, bytes) {
+                if !self.may_pass(gate, bytes) {
                     return false;
                 }
                 // Counted before the consumer can have it. A full `block` fifo is
@@ -330,12 +362,30 @@ impl Source for RingSource {
                     self.writer.ring();
                 }
             }
-            Ok(Err(error)) => self.broke(&ring, &Chain(&error).to_string()),
+            Ok(Err(error)) => self.broke(ring, &Chain(&error).to_string()),
             Err(panic) => self.broke(
-                &ring,
+                ring,
                 &format!("its delivery panicked: {}", coolbot::panic_message(&*panic)),
             ),
         }
+    }
+}
+
+impl RingSource {
+    /// Its consumer changed: what it holds is delivered now (to where the output
+    /// goes now), it is closed, and what the outlet wrote as it closed is delivered
+    /// too. A message the gate still holds, or one written after the last look, is
+    /// dropped: its number is counted missing when the key brings a later one.
+    fn hand_over(&self) {
+        if self.broken.swap(true, Ordering::Relaxed) {
+            return;
+        }
+        let mut ring = lock(&self.ring);
+        let mut gate = lock(&self.gate);
+        self.take(&mut ring, &mut gate);
+        ring.close();
+        self.take(&mut ring, &mut gate);
+        self.writer.ring();
     }
 }
 

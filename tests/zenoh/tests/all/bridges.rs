@@ -870,6 +870,17 @@ fn a_queue_bridge_to_a_consumer_on_this_host_goes_through_a_ring() {
 /// with a ufifo input it hands over (nothing it takes is lost).
 struct Held {
     gate: Receiver<()>,
+    /// Set when it leaves its entry section.
+    left: Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl Held {
+    fn new(gate: Receiver<()>) -> Held {
+        Held {
+            gate,
+            left: Arc::default(),
+        }
+    }
 }
 
 impl coolbot::Automaton for Held {
@@ -913,6 +924,7 @@ impl coolbot::Automaton for Held {
     ) -> Result<(), coolbot::Fault> {
         if section == coolbot::Section::Entry {
             let _ = self.gate.recv_timeout(PATIENCE);
+            self.left.store(true, Ordering::Release);
         }
         Ok(())
     }
@@ -935,7 +947,7 @@ fn a_full_ring_holds_the_packets_at_the_outlet_until_the_consumer_takes() {
     consumer
         .add(Component::new(
             "held",
-            Box::new(Held { gate }),
+            Box::new(Held::new(gate)),
             coolbot::PortSet::new().input(&input),
         ))
         .unwrap();
@@ -986,5 +998,122 @@ fn a_full_ring_holds_the_packets_at_the_outlet_until_the_consumer_takes() {
     assert_eq!(inlet.overflows, 0, "{inlet:?}");
     assert!(a.shared_memory().ring_written >= MORE);
     assert!(producer.shutdown().clean());
+    assert!(consumer.shutdown().clean());
+}
+
+/// Take packets from `input` until `last` arrives (or the patience runs out).
+fn received_until(input: &coolbot::port::UfifoIn<Pose>, last: u64) -> Vec<u64> {
+    let mut received = Vec::new();
+    let deadline = std::time::Instant::now() + PATIENCE;
+    while received.last() != Some(&last) && std::time::Instant::now() < deadline {
+        match input.recv() {
+            Some(packet) => received.push(packet.seq),
+            None => std::thread::sleep(Duration::from_millis(1)),
+        }
+    }
+    received
+}
+
+#[test]
+fn a_ring_follows_its_inlet_to_a_new_consumer_when_the_old_one_is_stuck() {
+    let (a, b) = pair("moved-a", "moved-b");
+    let key = "test/moved-ring";
+    // `stuck` never leaves its entry section while the test runs; `spare` has no
+    // gate to wait for.
+    let (hold, stuck_gate) = crossbeam_channel::bounded::<()>(0);
+    let (_, spare_gate) = crossbeam_channel::bounded::<()>(0);
+    let stuck_input = coolbot::port::UfifoIn::<Pose>::new(64, None);
+    let spare_input = coolbot::port::UfifoIn::<Pose>::new(64, None);
+    let mut consumer = System::new();
+    consumer
+        .add(
+            b.inlet::<Pose>("inlet", key, OutputKind::Data)
+                .build()
+                .unwrap(),
+        )
+        .unwrap();
+    let stuck = Held::new(stuck_gate);
+    let stuck_left = Arc::clone(&stuck.left);
+    for (name, held, input) in [
+        ("stuck", stuck, &stuck_input),
+        ("spare", Held::new(spare_gate), &spare_input),
+    ] {
+        consumer
+            .add(Component::new(
+                name,
+                Box::new(held),
+                coolbot::PortSet::new().input(input),
+            ))
+            .unwrap();
+    }
+    consumer.connect("inlet.output", "stuck.input").unwrap();
+    consumer.run_all().unwrap();
+    let (producer, out) = data_producer(
+        &a,
+        key,
+        InputKind::Fifo {
+            capacity: 8192,
+            policy: OverflowPolicy::Block,
+        },
+    );
+    wait_subscribed(&a, key);
+    let mut seq = 0;
+    assert!(
+        wait_until(PATIENCE, || {
+            out.send(pose(seq));
+            seq += 1;
+            a.shared_memory().ring_written > 0
+        }),
+        "the outlet never wrote into a ring"
+    );
+    // More than the ring holds: the rest waits at the outlet for the stuck consumer.
+    const MORE: u64 = 5000;
+    for n in seq..seq + MORE {
+        out.send(pose(n));
+    }
+    seq += MORE;
+    let first_ring = a.shared_memory().ring_written;
+    // The output goes to `spare` now, as a substitution moves it.
+    consumer.connect("inlet.output", "spare.input").unwrap();
+    consumer.disconnect("inlet.output", "stuck.input").unwrap();
+    // Every packet reaches `spare` in order from the change on, through the key and
+    // then through a ring on its own bell.
+    const AFTER: u64 = 2000;
+    for n in seq..seq + AFTER {
+        out.send(pose(n));
+    }
+    let total = seq + AFTER;
+    let received = received_until(&spare_input, total - 1);
+    let from = *received.first().expect("spare received nothing");
+    let in_order = received.iter().copied().eq(from..total);
+    assert!(
+        in_order,
+        "spare took {} packets from {from} to {:?}, not every one to {}",
+        received.len(),
+        received.last(),
+        total - 1
+    );
+    assert!(
+        from < seq,
+        "what waited in the ring and at the outlet went to spare (from {from})"
+    );
+    let mut next = total;
+    assert!(
+        wait_until(PATIENCE, || {
+            out.send(pose(next));
+            assert_eq!(received_until(&spare_input, next).last(), Some(&next));
+            next += 1;
+            a.shared_memory().ring_written > first_ring
+        }),
+        "the outlet never wrote into a ring of spare"
+    );
+    assert!(
+        !stuck_left.load(Ordering::Acquire),
+        "stuck was held all along (none of it was its thread's doing)"
+    );
+    let inlet = consumer.handle("inlet").unwrap().snapshot();
+    assert_eq!(inlet.overflows, 0, "{inlet:?}");
+    assert!(producer.shutdown().clean());
+    drop(hold);
     assert!(consumer.shutdown().clean());
 }
