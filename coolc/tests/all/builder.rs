@@ -118,10 +118,10 @@ fn builder_in_a_build_script() {
 }
 
 /// The compile-fail cases' crate (`tests/compile-fail`) holds the code `coolc`
-/// generates from its `gate.cool` checked in, so that trybuild's build of the cases
-/// needs no `coolc`: it must be what `coolc` generates today. With `COOLC_BLESS=1`
-/// the test writes it instead (then run the cases, `TRYBUILD=overwrite` if their
-/// messages moved).
+/// generates from its `gate.cool` checked in, so that the build of the cases needs no
+/// `coolc`: it must be what `coolc` generates today. With `COOLC_BLESS=1` the test
+/// writes it instead (then run the cases, with `COOLC_BLESS=1` too if their messages
+/// moved).
 #[test]
 fn generated_code_of_the_compile_fail_cases_is_current() {
     let crate_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/compile-fail");

@@ -2,8 +2,8 @@
 //! correct implementation of it that builds (so a case fails for its own reason only).
 
 /// The code `coolc` generated from `gate.cool`, checked in (`src/cool.rs`): a build
-/// script running `coolc` would make trybuild compile `coolc` and everything it
-/// depends on for its cases. coolc's tests check that it is what `coolc` generates
+/// script running `coolc` would make the build of the cases compile `coolc` and
+/// everything it depends on. coolc's tests check that it is what `coolc` generates
 /// today (`generated_code_of_the_compile_fail_cases_is_current`).
 #[allow(missing_docs, unused_qualifications)]
 pub mod generated {

@@ -1,5 +1,6 @@
-//! How the tests build the crates they generate, shared by coolc's tests and the
-//! docs' test (`tests/tests/docs.rs`, which includes this file): in one target
+//! How the tests build the crates they generate, shared by coolc's tests, the docs'
+//! test (`tests/tests/docs.rs`) and the compile-fail cases
+//! (`tests/compile-fail/tests/compile_fail.rs`), which include this file: in one target
 //! directory, with the workspace's lock and profile, so that the runtime and its
 //! dependencies are built there once.
 
@@ -7,9 +8,15 @@ use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The repository's root (both test packages are one level below it).
+/// The repository's root: the nearest directory above the test's package that holds
+/// the workspace's `Cargo.lock`.
 fn repository() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .skip(1)
+        .find(|dir| dir.join("Cargo.lock").is_file())
+        .expect("the workspace's Cargo.lock above the package")
+        .to_owned()
 }
 
 /// How every generated crate of the tests is built, in the target directory they
