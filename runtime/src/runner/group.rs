@@ -365,12 +365,15 @@ impl Group {
 }
 
 impl Runner {
-    /// Ask the processor to bring into its cache what this member's turn reads: its
-    /// runner, doorbell, inputs and outputs, and its current state's description.
+    /// Ask the processor to bring into its cache what this member's turn reads:
+    /// whether its bell rang (first: a word in the process's mapping of bells, away
+    /// from the rest of the doorbell), its runner, doorbell, inputs and outputs, and
+    /// its current state's description.
     /// After the group's thread slept a period, these are mostly out of the cache; a
     /// turn that met them one by one would wait for each in turn, where the
     /// prefetches for all the members overlap (and with the first members' work).
     fn prefetch(&self) {
+        prefetch(self.bell.state_word());
         prefetch(self);
         prefetch(&*self.bell);
         for input in &self.inputs {
