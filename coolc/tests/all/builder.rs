@@ -152,7 +152,7 @@ fn generated_code_of_the_compile_fail_cases_is_current() {
     panic!(
         "{} is not what coolc generates from gate.cool today: run \
          `COOLC_BLESS=1 cargo test -p coolc --test all generated_code_of_the_compile_fail_cases_is_current`, \
-         then `TRYBUILD=overwrite cargo test -p coolbot-compile-fail` and review both diffs",
+         then `COOLC_BLESS=1 cargo test -p coolbot-compile-fail` and review both diffs",
         checked_in_path.display()
     );
 }

@@ -146,9 +146,11 @@ impl<T: Packet> DataOut<T> {
 
     /// Call `watcher` after each change of this output's connections from now on (a
     /// connection made, removed, or moved to another input, as a substitution does),
-    /// on the thread that made the change once it is made, with no lock of the
-    /// output held: what keeps a view of where the output goes (its
-    /// [`DataOut::consumer_bell`]) looks again.
+    /// on the thread that made the change, once the output sends to its new inputs,
+    /// with no lock of the output held: what keeps a view of where the output goes
+    /// (its [`DataOut::consumer_bell`]) looks again. A watcher that panics is logged
+    /// and the change goes on. Watchers stay as long as the output: one that holds
+    /// the output itself keeps it alive (hold what it needs weakly).
     pub fn on_change(&self, watcher: impl Fn() + Send + Sync + 'static) {
         self.inner.sinks.watch(Arc::new(watcher));
     }
@@ -165,6 +167,16 @@ impl<T: Packet> DataOut<T> {
                 .map(|bell| crate::ConsumerBell { bell }),
             _ => None,
         }
+    }
+
+    /// Whether one of the inputs this output feeds directly belongs to the component
+    /// whose doorbell is at `bell` (see [`DataOut::consumer_bell`]).
+    pub fn feeds(&self, bell: crate::BellAddress) -> bool {
+        self.inner.sinks.read().iter().any(|sink| {
+            sink.target
+                .input_bell()
+                .is_some_and(|own| own.address() == Some(bell))
+        })
     }
 }
 

@@ -150,7 +150,13 @@ impl<T: Packet> Sinks<T> {
         // A copy of the list: a watcher may change these sinks, or add a watcher.
         let watchers = lock(&self.watchers).clone();
         for watcher in watchers {
-            watcher();
+            if let Err(panic) = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| watcher()))
+            {
+                tracing::error!(
+                    "a watcher of an output's connections panicked: {}",
+                    crate::thread::panic_message(panic.as_ref())
+                );
+            }
         }
         result
     }
@@ -650,8 +656,13 @@ mod tests {
         // input the change made.
         let seen = Arc::new(Mutex::new(Vec::new()));
         {
-            let (out, seen) = (rig.out.clone(), Arc::clone(&seen));
+            // Held weakly, as a watcher should hold its output.
+            let (output, seen) = (Arc::downgrade(&rig.out.inner), Arc::clone(&seen));
             rig.out.on_change(move || {
+                let Some(inner) = output.upgrade() else {
+                    return;
+                };
+                let out = DataOut { inner };
                 let consumers = out.consumers();
                 lock(&seen).push(consumers);
                 out.send(100 + consumers as u64);

@@ -1384,11 +1384,13 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
         // the output, watched for a change of its consumer.
         let consumer = match &output {
             InletOutput::Data(port) if pull.is_none() && node.same_host() => {
-                let watched = port.clone();
+                let (watched, fed) = (port.clone(), port.clone());
                 let port = port.clone();
                 Some((
                     Box::new(move || port.consumer_bell())
                         as Box<dyn Fn() -> Option<coolbot::ConsumerBell> + Send + Sync>,
+                    Box::new(move |bell| fed.feeds(bell))
+                        as Box<dyn Fn(coolbot::BellAddress) -> bool + Send + Sync>,
                     watched,
                 ))
             }
@@ -1406,13 +1408,14 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             key.clone(),
             max_payload,
         );
-        let rings = consumer.map(|(consumer, watched)| {
+        let rings = consumer.map(|(consumer, feeds, watched)| {
             let rings = InletRings::new(InletParts {
                 key: key.clone(),
                 answers_on: format!("{key}/@ring/{}/{name}", node.name()),
                 decode,
                 newest,
                 consumer,
+                feeds,
                 counters: node.shared_memory_counters(),
                 replier: node.replier(),
             });

@@ -43,6 +43,8 @@ pub(crate) struct InletParts {
     pub(crate) newest: NewestFn,
     /// The consumer's doorbell (the one component the inlet's output feeds).
     pub(crate) consumer: Box<dyn Fn() -> Option<ConsumerBell> + Send + Sync>,
+    /// Whether the inlet's output feeds the component whose doorbell is there.
+    pub(crate) feeds: Box<dyn Fn(BellAddress) -> bool + Send + Sync>,
     pub(crate) counters: Arc<crate::shm::Counters>,
     pub(crate) replier: crate::reply::Replier,
 }
@@ -193,6 +195,11 @@ impl InletRings {
         if !rings.0 {
             return Err("the inlet is not running".to_owned());
         }
+        // Read again under the lock a change's `follow_consumer` takes: a change since
+        // the first reading would otherwise leave this ring on a bell no one looks at.
+        if (parts.consumer)().and_then(|consumer| consumer.address()) != Some(bell) {
+            return Err("the inlet's consumer changed".to_owned());
+        }
         let entries = &mut rings.1;
         entries.retain(|entry| entry.outlet != outlet);
         if entries.len() >= MAX_RINGS {
@@ -212,17 +219,19 @@ impl InletRings {
 
     /// The inlet's output changed its connections (`DataOut::on_change`): a ring on
     /// the bell of a component the output no longer feeds (a substitution moved the
-    /// connection, or it now feeds several) would wait for that component's thread,
-    /// which may never take from it again. Such rings are handed over on this
-    /// thread, and their outlets go back to the key, then ask again: the answer
-    /// names the new consumer's bell.
+    /// connection to its substitute) would wait for that component's thread, which
+    /// may never take from it again. Such rings are handed over on this thread, and
+    /// their outlets go back to the key, then ask again: the answer names the new
+    /// consumer's bell. A ring whose consumer is still fed stays (its thread
+    /// delivers to every input the output feeds).
     pub(crate) fn follow_consumer(&self) {
-        let now = (self.parts.consumer)().and_then(|consumer| consumer.address());
         let moved: Vec<Entry> = {
+            // Under the lock `answer` adds a ring under: a ring it made on the old
+            // consumer is seen here, or it saw the change itself.
             let mut rings = lock(&self.rings);
             let (kept, moved) = std::mem::take(&mut rings.1)
                 .into_iter()
-                .partition(|entry| Some(entry.bell) == now);
+                .partition(|entry| (self.parts.feeds)(entry.bell));
             rings.1 = kept;
             moved
         };
@@ -372,18 +381,20 @@ impl RingSource {
 }
 
 impl RingSource {
-    /// Its consumer changed: what it holds is delivered now (to where the output
-    /// goes now), it is closed, and what the outlet wrote as it closed is delivered
-    /// too. A message the gate still holds, or one written after the last look, is
-    /// dropped: its number is counted missing when the key brings a later one.
+    /// Its consumer changed: it is closed (the outlet writes no more into it), and
+    /// what it holds is delivered now, to where the output goes now. The gate opens
+    /// for it: a key message still on its way before the ring's first is dropped
+    /// when it comes (counted missing), as when the gate's patience is over. A
+    /// message whose write had begun before the close and ends after the take is
+    /// lost too, and counted missing when the key brings a later number.
     fn hand_over(&self) {
         if self.broken.swap(true, Ordering::Relaxed) {
             return;
         }
         let mut ring = lock(&self.ring);
         let mut gate = lock(&self.gate);
-        self.take(&mut ring, &mut gate);
         ring.close();
+        *gate = Gate::Open;
         self.take(&mut ring, &mut gate);
         self.writer.ring();
     }

@@ -1072,10 +1072,12 @@ fn a_ring_follows_its_inlet_to_a_new_consumer_when_the_old_one_is_stuck() {
         out.send(pose(n));
     }
     seq += MORE;
-    let first_ring = a.shared_memory().ring_written;
-    // The output goes to `spare` now, as a substitution moves it.
+    // The output goes to `spare` now, as a substitution moves it. While it feeds
+    // both, the ring stays on `stuck`'s bell; once it no longer feeds `stuck`, the
+    // ring is handed over before `disconnect` returns.
     consumer.connect("inlet.output", "spare.input").unwrap();
     consumer.disconnect("inlet.output", "stuck.input").unwrap();
+    let handed_over = b.shared_memory().ring_taken;
     // Every packet reaches `spare` in order from the change on, through the key and
     // then through a ring on its own bell.
     const AFTER: u64 = 2000;
@@ -1097,15 +1099,17 @@ fn a_ring_follows_its_inlet_to_a_new_consumer_when_the_old_one_is_stuck() {
         from < seq,
         "what waited in the ring and at the outlet went to spare (from {from})"
     );
+    // Then through a ring on `spare`'s bell: taken by its thread (the old ring is
+    // gone, and `stuck` takes nothing).
     let mut next = total;
     assert!(
         wait_until(PATIENCE, || {
             out.send(pose(next));
             assert_eq!(received_until(&spare_input, next).last(), Some(&next));
             next += 1;
-            a.shared_memory().ring_written > first_ring
+            b.shared_memory().ring_taken > handed_over
         }),
-        "the outlet never wrote into a ring of spare"
+        "no packet went through a ring of spare"
     );
     assert!(
         !stuck_left.load(Ordering::Acquire),
