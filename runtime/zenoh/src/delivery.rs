@@ -25,6 +25,9 @@ pub(crate) enum Via {
     Stream,
     /// A ring of the same messages, from an outlet of this host (`crate::nearby`).
     Ring,
+    /// The last messages of a ring handed over to a new consumer, taken after it
+    /// closed: the outlet may have sent newer ones on the key meanwhile.
+    HandedOver,
     /// The current value of a `last` or poster outlet, on Zenoh's receiving thread.
     Answer,
     /// The answer to a pull request, on the inlet's (or proxy's) own thread while it

@@ -23,6 +23,10 @@ const RING_BYTES: usize = 64 << 10;
 /// way; longer, the link lost it.
 const GATE_PATIENCE: Duration = Duration::from_secs(1);
 
+/// How many times a ring handed over to a new consumer is emptied before it is
+/// closed, while its producer goes on writing (`RingSource::hand_over`).
+const HAND_OVER_ROUNDS: usize = 16;
+
 /// The most rings an inlet keeps (one per outlet on its host; a queue connection
 /// has N producers).
 const MAX_RINGS: usize = 16;
@@ -346,13 +350,16 @@ impl Source for RingSource {
         }
         let mut ring = lock(&self.ring);
         let mut gate = lock(&self.gate);
-        self.take(&mut ring, &mut gate);
+        if self.take(&mut ring, &mut gate, Via::Ring) {
+            self.writer.ring();
+        }
     }
 }
 
 impl RingSource {
-    /// Deliver what the gate lets through; a ring that breaks is closed.
-    fn take(&self, ring: &mut Ring, gate: &mut Gate) {
+    /// Deliver what the gate lets through; a ring that breaks is closed. True if the
+    /// outlet waits to be told of the room made.
+    fn take(&self, ring: &mut Ring, gate: &mut Gate, via: Via) -> bool {
         let taken = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             ring.take(|bytes| {
                 if !self.may_pass(gate, bytes) {
@@ -361,41 +368,55 @@ impl RingSource {
                 // Counted before the consumer can have it. A full `block` fifo is
                 // handled by the delivery as for the key: the inlet's backlog.
                 self.counters.ring_taken(1);
-                (self.decode)(&[bytes], Via::Ring);
+                (self.decode)(&[bytes], via);
                 true
             })
         }));
         match taken {
-            Ok(Ok(taken)) => {
-                if taken.writer_waits {
-                    self.writer.ring();
-                }
+            Ok(Ok(taken)) => taken.writer_waits,
+            Ok(Err(error)) => {
+                self.broke(ring, &Chain(&error).to_string());
+                false
             }
-            Ok(Err(error)) => self.broke(ring, &Chain(&error).to_string()),
-            Err(panic) => self.broke(
-                ring,
-                &format!("its delivery panicked: {}", coolbot::panic_message(&*panic)),
-            ),
+            Err(panic) => {
+                self.broke(
+                    ring,
+                    &format!("its delivery panicked: {}", coolbot::panic_message(&*panic)),
+                );
+                false
+            }
         }
     }
 }
 
 impl RingSource {
-    /// Its consumer changed: it is closed (the outlet writes no more into it), and
-    /// what it holds is delivered now, to where the output goes now. The gate opens
-    /// for it: a key message still on its way before the ring's first is dropped
-    /// when it comes (counted missing), as when the gate's patience is over. A
-    /// message whose write had begun before the close and ends after the take is
-    /// lost too, and counted missing when the key brings a later number.
+    /// Its consumer changed: what it holds is delivered now, to where the output
+    /// goes now, until it is empty (the outlet, not told of the room made, writes
+    /// only what its producer sends meanwhile; [`HAND_OVER_ROUNDS`] at most); then it
+    /// is closed (the outlet writes no more into it and goes back to the key), and
+    /// what was written since the last look is delivered too. Emptying it before
+    /// closing keeps the key's next message from overtaking the ring's: only those
+    /// written between the last two looks can meet it, and one that comes after a
+    /// newer one is dropped (counted missing: `Via::HandedOver`). The gate opens for
+    /// it: a key message still on its way before the ring's first is dropped when it
+    /// comes (counted missing), as when the gate's patience is over. A message whose
+    /// write had begun before the close and ends after the last look is lost too,
+    /// and counted missing when the key brings a later number.
     fn hand_over(&self) {
         if self.broken.swap(true, Ordering::Relaxed) {
             return;
         }
         let mut ring = lock(&self.ring);
         let mut gate = lock(&self.gate);
-        ring.close();
         *gate = Gate::Open;
-        self.take(&mut ring, &mut gate);
+        for _ in 0..HAND_OVER_ROUNDS {
+            if !ring.has_messages() {
+                break;
+            }
+            self.take(&mut ring, &mut gate, Via::Ring);
+        }
+        ring.close();
+        self.take(&mut ring, &mut gate, Via::HandedOver);
         self.writer.ring();
     }
 }

@@ -1075,9 +1075,19 @@ fn a_ring_follows_its_inlet_to_a_new_consumer_when_the_old_one_is_stuck() {
     // The output goes to `spare` now, as a substitution moves it. While it feeds
     // both, the ring stays on `stuck`'s bell; once it no longer feeds `stuck`, the
     // ring is handed over before `disconnect` returns.
+    let full = b.shared_memory().ring_taken;
     consumer.connect("inlet.output", "spare.input").unwrap();
+    assert_eq!(
+        b.shared_memory().ring_taken,
+        full,
+        "the ring stays while the output still feeds `stuck`"
+    );
     consumer.disconnect("inlet.output", "stuck.input").unwrap();
     let handed_over = b.shared_memory().ring_taken;
+    assert!(
+        handed_over > full,
+        "what the ring held was delivered as it was handed over"
+    );
     // Every packet reaches `spare` in order from the change on, through the key and
     // then through a ring on its own bell.
     const AFTER: u64 = 2000;
