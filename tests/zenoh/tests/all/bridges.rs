@@ -930,67 +930,84 @@ impl coolbot::Automaton for Held {
     }
 }
 
-#[test]
-fn a_full_ring_holds_the_packets_at_the_outlet_until_the_consumer_takes() {
-    let (a, b) = pair("full-a", "full-b");
-    let key = "test/full-ring";
-    let (open, gate) = crossbeam_channel::bounded::<()>(0);
-    let input = coolbot::port::UfifoIn::<Pose>::new(64, None);
+/// A consumer system: an inlet of `key` whose output goes to the first of `held`
+/// (each a component with a ufifo input), all running.
+fn held_consumers(
+    node: &Node,
+    key: &str,
+    held: Vec<(&str, Held, &coolbot::port::UfifoIn<Pose>)>,
+) -> System {
     let mut consumer = System::new();
     consumer
         .add(
-            b.inlet::<Pose>("inlet", key, OutputKind::Data)
+            node.inlet::<Pose>("inlet", key, OutputKind::Data)
                 .build()
                 .unwrap(),
         )
         .unwrap();
+    let first = held[0].0;
+    for (name, component, input) in held {
+        consumer
+            .add(Component::new(
+                name,
+                Box::new(component),
+                coolbot::PortSet::new().input(input),
+            ))
+            .unwrap();
+    }
     consumer
-        .add(Component::new(
-            "held",
-            Box::new(Held::new(gate)),
-            coolbot::PortSet::new().input(&input),
-        ))
+        .connect("inlet.output", &format!("{first}.input"))
         .unwrap();
-    consumer.connect("inlet.output", "held.input").unwrap();
     consumer.run_all().unwrap();
-    // The outlet's input holds every packet the ring does not.
+    consumer
+}
+
+/// Packets sent past a ring's adoption, more than a ring of 64 KiB holds.
+const MORE: u64 = 5000;
+
+/// A producer on `key` whose outlet's input holds 8,192 packets, streaming to a
+/// consumer that takes nothing: on the key until the ring is adopted (delivered
+/// without the consumer's thread), then [`MORE`] packets, which fill the ring, the
+/// rest waiting at the outlet. Returns the producer, its output and the packets sent.
+fn filling_ring(node: &Node, key: &str) -> (System, DataOut<Pose>, u64) {
     let (producer, out) = data_producer(
-        &a,
+        node,
         key,
         InputKind::Fifo {
             capacity: 8192,
             policy: OverflowPolicy::Block,
         },
     );
-    wait_subscribed(&a, key);
-    // On the key (delivered without the held thread) until the ring is adopted.
+    wait_subscribed(node, key);
     let mut seq = 0;
     assert!(
         wait_until(PATIENCE, || {
             out.send(pose(seq));
             seq += 1;
-            a.shared_memory().ring_written > 0
+            node.shared_memory().ring_written > 0
         }),
         "the outlet never wrote into a ring"
     );
-    const MORE: u64 = 5000;
     for n in seq..seq + MORE {
         out.send(pose(n));
     }
-    let total = seq + MORE;
+    (producer, out, seq + MORE)
+}
+
+#[test]
+fn a_full_ring_holds_the_packets_at_the_outlet_until_the_consumer_takes() {
+    let (a, b) = pair("full-a", "full-b");
+    let key = "test/full-ring";
+    let (open, gate) = crossbeam_channel::bounded::<()>(0);
+    let input = coolbot::port::UfifoIn::<Pose>::new(64, None);
+    let consumer = held_consumers(&b, key, vec![("held", Held::new(gate), &input)]);
+    let (producer, _out, total) = filling_ring(&a, key);
     // Nothing is taken from the ring while the consumer is held: it fills, and the
     // rest waits at the outlet.
     let written = a.shared_memory().ring_written;
     assert!(written < MORE, "{written} messages in a ring of 64 KiB");
     open.send(()).expect("the consumer is held");
-    let mut received = Vec::new();
-    let deadline = std::time::Instant::now() + PATIENCE;
-    while (received.len() as u64) < total && std::time::Instant::now() < deadline {
-        match input.recv() {
-            Some(packet) => received.push(packet.seq),
-            None => std::thread::sleep(Duration::from_millis(1)),
-        }
-    }
+    let received = received_until(&input, total - 1);
     assert_eq!(received, (0..total).collect::<Vec<_>>());
     let outlet = producer.handle("outlet").unwrap().snapshot();
     assert_eq!(outlet.overflows, 0, "{outlet:?}");
@@ -1024,54 +1041,18 @@ fn a_ring_follows_its_inlet_to_a_new_consumer_when_the_old_one_is_stuck() {
     let (_, spare_gate) = crossbeam_channel::bounded::<()>(0);
     let stuck_input = coolbot::port::UfifoIn::<Pose>::new(64, None);
     let spare_input = coolbot::port::UfifoIn::<Pose>::new(64, None);
-    let mut consumer = System::new();
-    consumer
-        .add(
-            b.inlet::<Pose>("inlet", key, OutputKind::Data)
-                .build()
-                .unwrap(),
-        )
-        .unwrap();
     let stuck = Held::new(stuck_gate);
     let stuck_left = Arc::clone(&stuck.left);
-    for (name, held, input) in [
-        ("stuck", stuck, &stuck_input),
-        ("spare", Held::new(spare_gate), &spare_input),
-    ] {
-        consumer
-            .add(Component::new(
-                name,
-                Box::new(held),
-                coolbot::PortSet::new().input(input),
-            ))
-            .unwrap();
-    }
-    consumer.connect("inlet.output", "stuck.input").unwrap();
-    consumer.run_all().unwrap();
-    let (producer, out) = data_producer(
-        &a,
+    let mut consumer = held_consumers(
+        &b,
         key,
-        InputKind::Fifo {
-            capacity: 8192,
-            policy: OverflowPolicy::Block,
-        },
-    );
-    wait_subscribed(&a, key);
-    let mut seq = 0;
-    assert!(
-        wait_until(PATIENCE, || {
-            out.send(pose(seq));
-            seq += 1;
-            a.shared_memory().ring_written > 0
-        }),
-        "the outlet never wrote into a ring"
+        vec![
+            ("stuck", stuck, &stuck_input),
+            ("spare", Held::new(spare_gate), &spare_input),
+        ],
     );
     // More than the ring holds: the rest waits at the outlet for the stuck consumer.
-    const MORE: u64 = 5000;
-    for n in seq..seq + MORE {
-        out.send(pose(n));
-    }
-    seq += MORE;
+    let (producer, out, seq) = filling_ring(&a, key);
     // The output goes to `spare` now, as a substitution moves it. While it feeds
     // both, the ring stays on `stuck`'s bell; once it no longer feeds `stuck`, the
     // ring is handed over before `disconnect` returns.
