@@ -373,7 +373,7 @@ impl Runner {
     /// turn that met them one by one would wait for each in turn, where the
     /// prefetches for all the members overlap (and with the first members' work).
     fn prefetch(&self) {
-        prefetch(self.bell.state_word());
+        prefetch(self.bell.state());
         prefetch(self);
         prefetch(&*self.bell);
         for input in &self.inputs {

@@ -280,15 +280,11 @@ impl Doorbell {
         })
     }
 
-    fn state(&self) -> &std::sync::atomic::AtomicU32 {
-        self.words.state()
-    }
-
     /// The word a turn reads first (whether the bell rang): in the process's mapping
     /// of bells, not beside the rest of the doorbell. An execution group asks the
     /// processor to fetch it before its members' turns (`crate::runner::group`).
-    pub(crate) fn state_word(&self) -> &std::sync::atomic::AtomicU32 {
-        self.state()
+    pub(crate) fn state(&self) -> &std::sync::atomic::AtomicU32 {
+        self.words.state()
     }
 
     /// Called by the component's thread before its first turn.

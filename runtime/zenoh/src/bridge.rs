@@ -1143,7 +1143,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
                         "{events} events in one message: more than an outlet sends ({MAX_EVENTS_PER_MESSAGE})"
                     )),
                     Ok((epoch, seq, events)) => {
-                        if matches!(via, Via::Stream | Via::Ring | Via::HandedOver) {
+                        if via.counted() {
                             gaps.received(epoch, seq);
                         }
                         for _ in 0..events {
@@ -1167,7 +1167,7 @@ fn deliverer<T: Packet + DeserializeOwned>(
                         // different threads; the ledger and `delivered` see them in one
                         // order, and the one taken as newer is sent last.
                         let mut delivered = lock(&delivered);
-                        if matches!(via, Via::Stream | Via::Ring | Via::HandedOver) {
+                        if via.counted() {
                             gaps.received(epoch, seq);
                         }
                         if !delivered.fresh(epoch, seq, via) {

@@ -34,3 +34,11 @@ pub(crate) enum Via {
     /// answers the request: sent to the requesting input alone, at once.
     Pull,
 }
+
+impl Via {
+    /// Whether the message is one of the stream's numbered messages, which the
+    /// ledger counts (the key's, or a ring's).
+    pub(crate) fn counted(self) -> bool {
+        matches!(self, Via::Stream | Via::Ring | Via::HandedOver)
+    }
+}
