@@ -1386,20 +1386,10 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             network: network.erased(),
             resets: resets.erased(),
         };
-        // The consumer's doorbell, asked when an outlet of this host asks for a ring;
-        // the output, watched for a change of its consumer.
-        let consumer = match &output {
-            InletOutput::Data(port) if pull.is_none() && node.same_host() => {
-                let (watched, fed) = (port.clone(), port.clone());
-                let port = port.clone();
-                Some((
-                    Box::new(move || port.consumer_bell())
-                        as Box<dyn Fn() -> Option<coolbot::ConsumerBell> + Send + Sync>,
-                    Box::new(move |bell| fed.feeds(bell))
-                        as Box<dyn Fn(coolbot::BellAddress) -> bool + Send + Sync>,
-                    watched,
-                ))
-            }
+        // The inlet's output, asked for its consumer's doorbell when an outlet of this
+        // host asks for a ring, and watched for a change of its consumer.
+        let feeding = match &output {
+            InletOutput::Data(port) if pull.is_none() && node.same_host() => Some(port.clone()),
             _ => None,
         };
         let Deliverer {
@@ -1414,24 +1404,16 @@ impl<T: Packet + Serialize + DeserializeOwned> InletBuilder<'_, T> {
             key.clone(),
             max_payload,
         );
-        let rings = consumer.map(|(consumer, feeds, watched)| {
-            let rings = InletRings::new(InletParts {
+        let rings = feeding.map(|output| {
+            InletRings::new(InletParts {
                 key: key.clone(),
                 answers_on: format!("{key}/@ring/{}/{name}", node.name()),
                 decode,
                 newest,
-                consumer,
-                feeds,
+                output: Box::new(output),
                 counters: node.shared_memory_counters(),
                 replier: node.replier(),
-            });
-            let follow = Arc::downgrade(&rings);
-            watched.on_change(move || {
-                if let Some(rings) = follow.upgrade() {
-                    rings.follow_consumer();
-                }
-            });
-            rings
+            })
         });
         let acks = match pull {
             Some(_) => None,

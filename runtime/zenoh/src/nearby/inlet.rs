@@ -45,12 +45,36 @@ pub(crate) struct InletParts {
     /// of the ring before it is handed on).
     pub(crate) decode: DecodeFn,
     pub(crate) newest: NewestFn,
-    /// The consumer's doorbell (the one component the inlet's output feeds).
-    pub(crate) consumer: Box<dyn Fn() -> Option<ConsumerBell> + Send + Sync>,
-    /// Whether the inlet's output feeds the component whose doorbell is there.
-    pub(crate) feeds: Box<dyn Fn(BellAddress) -> bool + Send + Sync>,
+    /// The inlet's output: which consumer it feeds.
+    pub(crate) output: Box<dyn Feeding>,
     pub(crate) counters: Arc<crate::shm::Counters>,
     pub(crate) replier: crate::reply::Replier,
+}
+
+/// What the rings ask of an inlet's output (a `coolbot::port::DataOut` of any
+/// packet type).
+pub(crate) trait Feeding: Send + Sync {
+    /// The doorbell of the one component the output feeds (None: it feeds none, or
+    /// several).
+    fn consumer(&self) -> Option<ConsumerBell>;
+    /// Whether the output feeds the component whose doorbell is at `bell`.
+    fn feeds(&self, bell: BellAddress) -> bool;
+    /// Call `watcher` after each change of the output's connections.
+    fn on_change(&self, watcher: Box<dyn Fn() + Send + Sync>);
+}
+
+impl<T: coolbot::Packet> Feeding for coolbot::port::DataOut<T> {
+    fn consumer(&self) -> Option<ConsumerBell> {
+        self.consumer_bell()
+    }
+
+    fn feeds(&self, bell: BellAddress) -> bool {
+        coolbot::port::DataOut::feeds(self, bell)
+    }
+
+    fn on_change(&self, watcher: Box<dyn Fn() + Send + Sync>) {
+        coolbot::port::DataOut::on_change(self, watcher);
+    }
 }
 
 /// One ring of an inlet: the outlet it is for, the source on the consumer's bell,
@@ -77,11 +101,20 @@ pub(crate) struct InletRings {
 }
 
 impl InletRings {
+    /// The rings of an inlet, which follow its output to a new consumer
+    /// ([`InletRings::follow_consumer`]).
     pub(crate) fn new(parts: InletParts) -> Arc<InletRings> {
-        Arc::new(InletRings {
+        let rings = Arc::new(InletRings {
             parts,
             rings: Mutex::new((false, Vec::new())),
-        })
+        });
+        let follow = Arc::downgrade(&rings);
+        rings.parts.output.on_change(Box::new(move || {
+            if let Some(rings) = follow.upgrade() {
+                rings.follow_consumer();
+            }
+        }));
+        rings
     }
 
     /// Drop every ring (the inlet stopped): their outlets go back to the key.
@@ -171,7 +204,9 @@ impl InletRings {
                 return Err(format!("the inlet has {MAX_RINGS} rings in use"));
             }
         }
-        let consumer = (parts.consumer)()
+        let consumer = parts
+            .output
+            .consumer()
             .ok_or("the inlet's output does not feed one input directly (no consumer to ring)")?;
         let bell = consumer
             .address()
@@ -201,7 +236,12 @@ impl InletRings {
         }
         // Read again under the lock a change's `follow_consumer` takes: a change since
         // the first reading would otherwise leave this ring on a bell no one looks at.
-        if (parts.consumer)().and_then(|consumer| consumer.address()) != Some(bell) {
+        if parts
+            .output
+            .consumer()
+            .and_then(|consumer| consumer.address())
+            != Some(bell)
+        {
             return Err("the inlet's consumer changed".to_owned());
         }
         let entries = &mut rings.1;
@@ -235,7 +275,7 @@ impl InletRings {
             let mut rings = lock(&self.rings);
             let (kept, moved) = std::mem::take(&mut rings.1)
                 .into_iter()
-                .partition(|entry| (self.parts.feeds)(entry.bell));
+                .partition(|entry| self.parts.output.feeds(entry.bell));
             rings.1 = kept;
             moved
         };
