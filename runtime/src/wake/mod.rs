@@ -602,6 +602,111 @@ mod tests {
         group.join().unwrap();
     }
 
+    /// The environment variable that makes [`on_the_heap`] run (in a process of its
+    /// own: it takes every bell of the process's mapping).
+    #[cfg(target_os = "linux")]
+    const HEAP: &str = "COOLBOT_TEST_HEAP_BELLS";
+
+    /// Bells on the heap (the process's mapping of bells is full, or none could be
+    /// made: they are what a process off Linux has) ring, wake and group as mapped
+    /// ones; [`on_the_heap`], in another process.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn bells_on_the_heap_wake_a_thread_and_a_group() {
+        let output = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--ignored",
+                "--exact",
+                "wake::tests::on_the_heap",
+                "--test-threads=1",
+            ])
+            .env(HEAP, "1")
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            output.status.success(),
+            "the process with bells on the heap failed: {}\n{stdout}\n{}",
+            output.status,
+            String::from_utf8_lossy(&output.stderr)
+        );
+        assert!(stdout.contains("1 passed"), "{stdout}");
+    }
+
+    /// The other process of [`bells_on_the_heap_wake_a_thread_and_a_group`]: takes
+    /// every pair of the mapping, then checks the heap's bells.
+    #[cfg(target_os = "linux")]
+    #[test]
+    #[ignore = "run by bells_on_the_heap_wake_a_thread_and_a_group, in a process of its own"]
+    fn on_the_heap() {
+        use std::sync::mpsc;
+        use std::time::Duration;
+        assert!(std::env::var_os(HEAP).is_some(), "run by its test");
+        // Every pair of the mapping taken: the next bells are on the heap.
+        let mut mapped = Vec::new();
+        let heap = loop {
+            let bell = Doorbell::new();
+            if bell.address().is_none() {
+                break bell;
+            }
+            mapped.push(bell);
+        };
+        assert_eq!(mapped.len(), (words::PAIRS_IN_A_MAPPING - 1) as usize);
+        let limit = Duration::from_secs(60);
+
+        // A thread asleep on a bell on the heap is woken by a ring.
+        let (woke, woken) = mpsc::channel();
+        let sleeper = {
+            let bell = Arc::clone(&heap);
+            std::thread::spawn(move || {
+                bell.attach();
+                bell.park_until(None);
+                woke.send(bell.is_rung()).unwrap();
+            })
+        };
+        while heap.state().load(Ordering::SeqCst) != SLEEPING {
+            std::thread::yield_now();
+        }
+        heap.ring();
+        assert_eq!(woken.recv_timeout(limit), Ok(true), "woken by the ring");
+        sleeper.join().unwrap();
+
+        // A group on the heap (its word and its members' bells): a ring of the second
+        // member wakes the thread, asleep on the group's word.
+        let (first, second, word) = (Doorbell::new(), Doorbell::new(), GroupWord::new());
+        assert!(first.address().is_none() && second.address().is_none());
+        let (woke, woken) = mpsc::channel();
+        let group = {
+            let (first, second, word) =
+                (Arc::clone(&first), Arc::clone(&second), Arc::clone(&word));
+            std::thread::spawn(move || {
+                first.attach_to_group(&word);
+                second.attach_to_group(&word);
+                Doorbell::park_any(&[&first, &second], &word, None);
+                woke.send((first.is_rung(), second.is_rung())).unwrap();
+            })
+        };
+        while word.0.state().load(Ordering::SeqCst) != SLEEPING
+            || second.state().load(Ordering::SeqCst) != SLEEPING
+        {
+            std::thread::yield_now();
+        }
+        second.ring();
+        assert_eq!(woken.recv_timeout(limit), Ok((false, true)));
+        group.join().unwrap();
+
+        // A bell of the mapping in a group whose word is on the heap: no other process
+        // could wake the group's thread through it, so it gives no address.
+        drop(mapped.pop());
+        let member = Doorbell::new();
+        assert!(
+            member.address().is_some(),
+            "a pair given back is taken again"
+        );
+        member.attach_to_group(&word);
+        assert!(member.address().is_none());
+    }
+
     /// A ringer that names a mapping that is not the one it was told of (another
     /// nonce: a process that ended and whose pid was taken) is refused.
     #[cfg(target_os = "linux")]

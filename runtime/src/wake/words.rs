@@ -101,6 +101,11 @@ impl Drop for Pair {
     }
 }
 
+/// Pairs in the process's mapping (the header's among them): the bells made while
+/// they are all taken are on the heap.
+#[cfg(all(test, target_os = "linux"))]
+pub(crate) const PAIRS_IN_A_MAPPING: u32 = mapped::PAIRS;
+
 /// Words from one pair's start to the next's: a cache line.
 const STRIDE: u32 = 16;
 
