@@ -126,6 +126,17 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
     system
         .run_all()
         .map_err(|e| format!("cannot start: {}", coolbot::Chain(&e)))?;
+    // A component that could not start (`starting_error`: its `start` failed, or an
+    // instance's node was not there) ends the run with its reason.
+    if let Some(failed) = handles
+        .iter()
+        .find(|handle| handle.state() == coolbot::State::StartingError)
+    {
+        let reason = failed.snapshot().error.unwrap_or_default();
+        let name = failed.name().to_owned();
+        println!("{}", process.shutdown(system));
+        return Err(format!("cannot start: `{name}` failed to start: {reason}").into());
+    }
     match run_for {
         Some(duration) => {
             process.wait(duration);

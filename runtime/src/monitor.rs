@@ -445,6 +445,15 @@ pub enum Step {
     },
 }
 
+impl Step {
+    /// Whether the step is routine: a command the instance took, or a retry that
+    /// failed (the instance stays queued and the next retry comes). The log has them
+    /// at `debug`, every other step at `info`; `coolctl top` can hide them.
+    pub fn is_routine(&self) -> bool {
+        matches!(self, Step::Commanded { .. } | Step::RetryFailed)
+    }
+}
+
 /// One change on the monitoring port.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum MonitorEvent {

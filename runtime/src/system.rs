@@ -1509,8 +1509,14 @@ impl System {
                     crate::Command::SetState(Controllable::Dead),
                     false,
                 );
-                if let Err(error) = slot.handle.post_control(message) {
-                    tracing::warn!(component = %slot.handle.name(), "`dead` not queued at shutdown: {error:?}");
+                // A closed control queue: the component is dead already (a compound
+                // that stops sends its instances to `dead` before its system stops).
+                match slot.handle.post_control(message) {
+                    Ok(()) | Err(crate::mailbox::PostError::Closed) => {}
+                    Err(error) => tracing::warn!(
+                        component = %slot.handle.name(),
+                        "`dead` not queued at shutdown: {error:?}"
+                    ),
                 }
                 slot.handle.bell.ring_command();
             }

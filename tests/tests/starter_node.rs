@@ -324,7 +324,7 @@ fn the_starter_main_runs_as_the_robot_or_as_the_station() {
 
     // coolctl's view: the robot's compound with its local instance and the proxy of
     // the remote one; the station's instance, built for the robot, running.
-    let config = coolbot_zenoh::peer_config(&[], &[listen, robot_listen], false).unwrap();
+    let config = coolbot_zenoh::peer_config(&[], &[listen.clone(), robot_listen], false).unwrap();
     let session = coolbot_zenoh::zenoh::Wait::wait(coolbot_zenoh::zenoh::open(config)).unwrap();
     let ctl = Ctl::new(session, Duration::from_secs(2));
     let running = |listed: &[Listed], node: &str, path: &str| {
@@ -374,6 +374,44 @@ fn the_starter_main_runs_as_the_robot_or_as_the_station() {
         l == "station: node `station` stopped"
     });
     assert!(status.success(), "{status:?}");
+    // A compound that stops sends its instances to `dead` before its system stops:
+    // nothing to warn about then.
+    seen.extend(lines.try_iter());
+    let warned: Vec<&String> = seen
+        .iter()
+        .filter(|l| l.contains("not queued at shutdown"))
+        .collect();
+    assert!(warned.is_empty(), "{warned:#?}");
+
+    // The robot alone: its remote instance's node is not there, so the compound
+    // cannot start, and the process says so and fails (it does not wait for nothing,
+    // nor end as a clean run).
+    let mut alone = spawn(
+        &binary,
+        "alone",
+        &[
+            &["forever", "--node", "robot", "--connect", &listen][..],
+            &network,
+        ]
+        .concat(),
+        &sender,
+    );
+    let line = wait_line(&lines, &mut seen, "of the start failing", |l| {
+        l.starts_with("alone stderr: Error: ")
+    });
+    assert!(
+        line.contains("cannot start: `duo` failed to start: ") && line.contains("`station`"),
+        "{line}"
+    );
+    let deadline = Instant::now() + PATIENCE;
+    let status = loop {
+        if let Some(status) = alone.try_wait().unwrap() {
+            break status;
+        }
+        assert!(Instant::now() < deadline, "no exit within {PATIENCE:?}");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(!status.success(), "{status:?}");
 }
 
 const TRIO: &str = r#"

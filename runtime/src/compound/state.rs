@@ -174,14 +174,17 @@ pub(super) fn command(handle: &Handle, target: Controllable) -> Result<(), Fault
 impl Compound {
     /// Record a supervision step about instance `index` for the monitoring port.
     pub(super) fn step(&mut self, index: usize, step: Step, detail: impl Into<String>) {
-        let detail = detail.into();
-        let instance = self.instances[index].name.clone();
-        tracing::info!(compound = %self.name, %instance, ?step, "{detail}");
-        self.steps.push(Supervision {
-            instance,
+        let supervision = Supervision {
+            instance: self.instances[index].name.clone(),
             step,
-            detail,
-        });
+            detail: detail.into(),
+        };
+        if supervision.step.is_routine() {
+            tracing::debug!(compound = %self.name, "{supervision}");
+        } else {
+            tracing::info!(compound = %self.name, "{supervision}");
+        }
+        self.steps.push(supervision);
     }
 
     /// A fault raised while handling instance `index` (a rewiring or a command that

@@ -183,6 +183,13 @@ fn a_node_lost_is_logged_once_when_it_goes_and_once_when_it_is_back() {
     // One line for the loss, whatever the retries.
     let loss_lines = lines_with(&["WARN", lost, "no instantiation is sent to it"]);
     assert_eq!(loss_lines.len(), 1, "{loss_lines:#?}");
+    // The steps are logged as their text: the failure at `info`, the failed retries,
+    // routine, at `debug` only (not captured here).
+    let failed = lines_with(&["INFO", "compound=cell", "flaky failed"]);
+    assert!(!failed.is_empty(), "no step line for the failure");
+    let mut retried = lines_with(&["retry failed"]);
+    retried.extend(lines_with(&["RetryFailed"]));
+    assert!(retried.is_empty(), "{retried:#?}");
     // The proxy's own errors: logged when they change, at most every 10 s, not once
     // a retry (the same error each time).
     let proxy_lines = lines_with(&["WARN", "coolbot::runner", "flaky"]);

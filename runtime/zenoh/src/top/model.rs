@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::{Duration, Instant};
 
-use coolbot::{Monitor, MonitorEvent, Step, Supervision};
+use coolbot::{Monitor, MonitorEvent, Supervision};
 use serde::Serialize;
 
 use crate::ctl::{Listed, describe};
@@ -39,12 +39,6 @@ pub enum Focus {
     Components,
     /// The steps pane: the keys scroll it.
     Steps,
-}
-
-/// Whether a supervision step is routine: a command the instance took, a retry that
-/// failed (it stays queued, and the next one comes).
-fn routine(step: &Step) -> bool {
-    matches!(step, Step::Commanded { .. } | Step::RetryFailed)
 }
 
 /// One component as `top` shows it.
@@ -228,9 +222,10 @@ impl Board {
     /// at the next refresh.
     pub fn step(&mut self, address: &str, event: &MonitorEvent, at: &str) {
         let (whose, routine) = match event {
-            MonitorEvent::Supervision(step) => {
-                (format!("{address}:{}", step.instance), routine(&step.step))
-            }
+            MonitorEvent::Supervision(step) => (
+                format!("{address}:{}", step.instance),
+                step.step.is_routine(),
+            ),
             MonitorEvent::Adaptation(step) => (format!("{address}:{}", step.component), false),
             _ => return,
         };
@@ -259,7 +254,7 @@ impl Board {
         for (address, step) in history {
             self.push(StepLine {
                 whose: format!("{address}:{}", step.instance),
-                routine: routine(&step.step),
+                routine: step.step.is_routine(),
                 text: format!("earlier {address}: supervision: {step}"),
             });
         }
@@ -473,6 +468,7 @@ impl Board {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use coolbot::Step;
 
     /// A monitor as a node would publish it for a running component.
     pub(crate) fn monitor(name: &str, cpu_ms: u64) -> Monitor {
