@@ -403,6 +403,7 @@ fn compile(
     };
     let krate = lower::lower(&checked, &options);
     timings.span("lower");
+    left_out(out, files, &checked, &krate)?;
     let report = merge::write_crate_with(out, &krate, write)
         .map_err(|e| Failure::Usage(format!("cannot write {}: {e}", out.display())))?;
     if write.check {
@@ -423,6 +424,88 @@ fn compile(
         report.written.len()
     );
     Ok(krate)
+}
+
+/// Refuses a compile that would remove a component's generated module, whose user
+/// file stays, while a description in the crate's directory is not among the
+/// compile's: most likely the one that describes it, left out of the command line
+/// (the crate's components are compiled together). Deleting a description removes
+/// its components; a compile of every description keeps them.
+fn left_out(
+    out: &Path,
+    files: &[PathBuf],
+    checked: &Checked,
+    krate: &crate::ir::Crate,
+) -> Result<(), Failure> {
+    let orphaned = merge::orphaned_user_files(out, krate);
+    if orphaned.is_empty() {
+        return Ok(());
+    }
+    let compiled: Vec<PathBuf> = checked
+        .sources()
+        .files()
+        .iter()
+        .filter_map(|file| std::fs::canonicalize(&file.path).ok())
+        .collect();
+    let mut undescribed = Vec::new();
+    descriptions_under(out, 0, &mut undescribed);
+    undescribed
+        .retain(|path| std::fs::canonicalize(path).is_ok_and(|path| !compiled.contains(&path)));
+    if undescribed.is_empty() {
+        return Ok(());
+    }
+    undescribed.sort();
+    let shown = |path: &Path| path.strip_prefix(".").unwrap_or(path).display().to_string();
+    let removed: Vec<String> = orphaned
+        .iter()
+        .map(|user| {
+            let name = user.file_name().unwrap_or_default();
+            format!(
+                "{} (which {} uses)",
+                shown(&Path::new("src/generated").join(name)),
+                shown(user)
+            )
+        })
+        .collect();
+    let command: Vec<String> = files
+        .iter()
+        .chain(&undescribed)
+        .map(|path| shown(path))
+        .collect();
+    Err(Failure::Usage(format!(
+        "this compile would remove {}, and {} in the crate is not among its descriptions: \
+         compile every description of the crate together (coolc compile {} -o {}), or \
+         delete the description of a component you are removing. Nothing was written.",
+        removed.join(", "),
+        undescribed
+            .iter()
+            .map(|path| shown(path))
+            .collect::<Vec<_>>()
+            .join(", "),
+        command.join(" "),
+        out.display()
+    )))
+}
+
+/// The `.cool` files under `dir`, not in `target/` or a hidden directory (at most a
+/// few levels down: the crate's own directories).
+fn descriptions_under(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) {
+    const DEPTH: usize = 4;
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if path.is_dir() {
+            if depth < DEPTH && !name.starts_with('.') && name != "target" {
+                descriptions_under(&path, depth + 1, found);
+            }
+        } else if path.extension().is_some_and(|e| e == "cool") {
+            found.push(path);
+        }
+    }
 }
 
 /// A file `compile --check` found out of date, as one JSON line

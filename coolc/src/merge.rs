@@ -728,39 +728,23 @@ fn write_files_except(
         report.warnings.extend(merged.warnings);
     }
     // Generated files no description asks for any more (a removed component, the
-    // build script of a removed `link system`) would linger: remove them, but only
-    // files that carry coolc's generated header.
-    let mut candidates = vec![PathBuf::from("build.rs")];
-    if let Ok(entries) = fs::read_dir(dir.join("src/generated")) {
-        for entry in entries.flatten() {
-            candidates.push(Path::new("src/generated").join(entry.file_name()));
-        }
-    }
-    candidates.sort();
-    let emitted: HashSet<&Path> = files.iter().map(|f| f.path.as_path()).collect();
-    for candidate in candidates {
-        if emitted.contains(candidate.as_path()) {
-            continue;
-        }
+    // build script of a removed `link system`) would linger: remove them.
+    for candidate in stale_generated(dir, files) {
         let path = dir.join(&candidate);
-        let generated =
-            fs::read_to_string(&path).is_ok_and(|text| text.starts_with(GENERATED_HEADER));
-        if generated {
-            writer.remove(&path)?;
-            if let Some(name) = candidate
-                .file_name()
-                .filter(|_| candidate.starts_with("src/generated"))
-            {
-                let user = Path::new("src").join(name);
-                if dir.join(&user).exists() {
-                    report.warnings.push(format!(
-                        "{} belongs to a component that is no longer described (kept): remove it and its `pub mod` line in src/lib.rs",
-                        user.display()
-                    ));
-                }
+        writer.remove(&path)?;
+        if let Some(name) = candidate
+            .file_name()
+            .filter(|_| candidate.starts_with("src/generated"))
+        {
+            let user = Path::new("src").join(name);
+            if dir.join(&user).exists() {
+                report.warnings.push(format!(
+                    "{} belongs to a component that is no longer described (kept): remove it and its `pub mod` line in src/lib.rs",
+                    user.display()
+                ));
             }
-            report.removed.push(candidate);
         }
+        report.removed.push(candidate);
     }
     // Keep the latest stubs for reference (what coolc would write today).
     if !writer.check {
@@ -775,6 +759,58 @@ fn write_files_except(
         }
     }
     Ok(report)
+}
+
+/// The generated files in the crate at `dir` that writing `files` would remove: those
+/// no description asks for any more (a removed component, the build script of a
+/// removed `link system`), and only files that carry coolc's generated header.
+fn stale_generated(dir: &Path, files: &[EmittedFile]) -> Vec<PathBuf> {
+    let mut candidates = vec![PathBuf::from("build.rs")];
+    if let Ok(entries) = fs::read_dir(dir.join("src/generated")) {
+        for entry in entries.flatten() {
+            candidates.push(Path::new("src/generated").join(entry.file_name()));
+        }
+    }
+    candidates.sort();
+    let emitted: HashSet<&Path> = files.iter().map(|f| f.path.as_path()).collect();
+    candidates
+        .into_iter()
+        .filter(|candidate| {
+            !emitted.contains(candidate.as_path())
+                && fs::read_to_string(dir.join(candidate))
+                    .is_ok_and(|text| text.starts_with(GENERATED_HEADER))
+        })
+        .collect()
+}
+
+/// The components whose generated module writing `krate` into the crate at `dir`
+/// would remove while their user file stays (`src/<module>.rs`, which uses it): the
+/// crate would not build until that file went too. A compile that leaves out a
+/// description by mistake does this; one whose component was meant to go does too,
+/// and its user file is then the user's to remove.
+pub(crate) fn orphaned_user_files(dir: &Path, krate: &ir::Crate) -> Vec<PathBuf> {
+    /// Generated files that are no component's module.
+    const NOT_MODULES: [&str; 5] = ["mod", "types", "support", "converters", "generated"];
+    let modules = emit::user_modules(krate);
+    let Ok(entries) = fs::read_dir(dir.join("src/generated")) else {
+        return Vec::new();
+    };
+    let mut orphaned: Vec<PathBuf> = entries
+        .flatten()
+        .filter_map(|entry| {
+            let path = entry.path();
+            let stem = path.file_stem()?.to_str()?.to_owned();
+            let user = Path::new("src").join(entry.file_name());
+            (path.extension().is_some_and(|e| e == "rs")
+                && !NOT_MODULES.contains(&stem.as_str())
+                && !modules.contains(&stem)
+                && dir.join(&user).is_file()
+                && fs::read_to_string(&path).is_ok_and(|text| text.starts_with(GENERATED_HEADER)))
+            .then_some(user)
+        })
+        .collect();
+    orphaned.sort();
+    orphaned
 }
 
 #[cfg(test)]

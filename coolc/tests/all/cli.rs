@@ -770,3 +770,58 @@ fn compile_checks_the_package_name_as_new_does() {
         );
     }
 }
+
+#[test]
+fn a_compile_that_leaves_out_a_description_of_the_crate_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = coolc(&["new", "blinker"], dir.path());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let krate = dir.path().join("blinker");
+    let blinker = std::fs::read_to_string(krate.join("components/blinker.cool")).unwrap();
+    std::fs::write(
+        krate.join("components/pulse.cool"),
+        blinker.replace("Blinker", "Pulse"),
+    )
+    .unwrap();
+    // Only the new description: the blinker's generated module would go while its
+    // user file stays, and its description is still there. Nothing is written.
+    let before = tree(&krate);
+    let out = coolc(&["compile", "components/pulse.cool", "-o", "."], &krate);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains(
+            "this compile would remove src/generated/blinker.rs (which src/blinker.rs uses), \
+             and components/blinker.cool in the crate is not among its descriptions: compile \
+             every description of the crate together (coolc compile components/pulse.cool \
+             components/blinker.cool -o .)"
+        ),
+        "{stderr}"
+    );
+    assert_eq!(tree(&krate), before, "nothing written");
+    // Both descriptions: compiled together.
+    let out = coolc(
+        &[
+            "compile",
+            "components/pulse.cool",
+            "components/blinker.cool",
+            "-o",
+            ".",
+        ],
+        &krate,
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(krate.join("src/generated/pulse.rs").is_file());
+    // The blinker's description deleted: its component goes, as before (its user file
+    // is the user's to remove).
+    std::fs::remove_file(krate.join("components/blinker.cool")).unwrap();
+    let out = coolc(&["compile", "components/pulse.cool", "-o", "."], &krate);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("removed src/generated/blinker.rs (no longer generated)")
+            && stderr.contains("src/blinker.rs belongs to a component that is no longer described"),
+        "{stderr}"
+    );
+    assert!(!krate.join("src/generated/blinker.rs").exists());
+}
