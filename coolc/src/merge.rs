@@ -237,13 +237,44 @@ pub(crate) fn merge_modules(
         .cloned()
         .collect();
     let mut text = lib_rs.to_owned();
-    if !missing.is_empty() && !text.ends_with('\n') {
+    if missing.is_empty() {
+        return Ok((text, missing));
+    }
+    if !text.ends_with('\n') {
         text.push('\n');
     }
     for module in &missing {
         text.push_str(&format!("pub mod {module};\n"));
     }
-    Ok((text, missing))
+    Ok((sort_last_modules(&text), missing))
+}
+
+/// `text` with its last run of `pub mod name;` lines in the order rustfmt gives
+/// module declarations (by name, `r#` aside), so that the modules coolc adds leave
+/// the file as `cargo fmt` would.
+fn sort_last_modules(text: &str) -> String {
+    let lines: Vec<&str> = text.lines().collect();
+    let declaration = |line: &str| {
+        line.strip_prefix("pub mod ")
+            .and_then(|rest| rest.strip_suffix(';'))
+            .filter(|name| {
+                let name = name.strip_prefix("r#").unwrap_or(name);
+                !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            })
+            .map(|name| name.strip_prefix("r#").unwrap_or(name).to_owned())
+    };
+    let end = lines.len();
+    let start = lines
+        .iter()
+        .rposition(|line| declaration(line).is_none())
+        .map_or(0, |i| i + 1);
+    let mut run = lines[start..end].to_vec();
+    run.sort_by_key(|line| declaration(line));
+    let mut sorted: Vec<&str> = lines[..start].to_vec();
+    sorted.extend(run);
+    let mut out = sorted.join("\n");
+    out.push('\n');
+    out
 }
 
 /// How [`write_crate_with`] writes.
@@ -878,6 +909,25 @@ mod tests {
         )
         .unwrap();
         assert_eq!(added, ["b"]);
-        assert_eq!(text, "pub mod generated;\npub mod a;\npub mod b;\n");
+        assert_eq!(text, "pub mod a;\npub mod b;\npub mod generated;\n");
+    }
+
+    #[test]
+    fn modules_added_keep_the_last_declarations_in_rustfmts_order() {
+        let lib = "//! Doc.\n\npub mod generated;\n\npub mod sensor;\n";
+        let modules: Vec<String> = ["sensor", "estimator", "r#loop", "camera", "a_b", "aB"]
+            .map(str::to_owned)
+            .to_vec();
+        let (text, added) = merge_modules(lib, &modules).unwrap();
+        assert_eq!(added, ["estimator", "r#loop", "camera", "a_b", "aB"]);
+        assert_eq!(
+            text,
+            "//! Doc.\n\npub mod generated;\n\npub mod aB;\npub mod a_b;\npub mod camera;\n\
+             pub mod estimator;\npub mod r#loop;\npub mod sensor;\n"
+        );
+        // Nothing to add: the file as it was, order included.
+        let (same, added) = merge_modules("pub mod b;\npub mod a;", &modules[..0]).unwrap();
+        assert!(added.is_empty());
+        assert_eq!(same, "pub mod b;\npub mod a;");
     }
 }
