@@ -596,7 +596,36 @@ impl CompoundBuilder {
         if !self.errors.is_empty() {
             return Err(self.errors.swap_remove(0));
         }
-        let planned: Vec<(&str, &str)> = self.links.iter().map(Link::ends).collect();
+        // A substitute has no connections of its own until it stands in: in an
+        // execution group it runs where its original's would put it (after what
+        // feeds the original, before what the original feeds), so that standing in
+        // it is in the same cycle's flow.
+        let made: Vec<(&str, &str)> = self.links.iter().map(Link::ends).collect();
+        let stand_ins: Vec<(String, String)> = self
+            .substitutes
+            .iter()
+            .flat_map(|(substitute, primary)| {
+                let moved = move |end: &str| {
+                    end.split_once('.')
+                        .filter(|(instance, _)| instance == primary)
+                        .map(|(_, port)| format!("{substitute}.{port}"))
+                };
+                made.iter()
+                    .filter_map(move |&(from, to)| match (moved(from), moved(to)) {
+                        (None, None) => None,
+                        (moved_from, moved_to) => Some((
+                            moved_from.unwrap_or_else(|| from.to_owned()),
+                            moved_to.unwrap_or_else(|| to.to_owned()),
+                        )),
+                    })
+            })
+            .collect();
+        let mut planned = made.clone();
+        planned.extend(
+            stand_ins
+                .iter()
+                .map(|(from, to)| (from.as_str(), to.as_str())),
+        );
         if let Err(source) = self.system.plan_groups(&planned) {
             return Err(CompoundError::Instance {
                 compound: self.name.clone(),

@@ -648,6 +648,57 @@ fn a_failed_member_is_substituted_by_a_compound_outside_the_group() {
     assert!(report.clean(), "{report:?}");
 }
 
+/// A substitute that is a member of the group runs, standing in, where its original
+/// ran in the data flow (after what feeds it, before what it feeds), whatever its
+/// place in the group's list: it has no connections of its own when the group's
+/// order is made.
+#[test]
+fn a_substitute_in_the_group_runs_in_its_originals_place_in_the_flow() {
+    use coolbot::{CompoundBuilder, Policy};
+    use coolbot_runtime_tests::supervision::Coordinating;
+    let log = Log::default();
+    let (mut system, clock) = system();
+    let base = CompoundBuilder::new("base", Coordinating)
+        .instance(stage::component("a", step("a", &log)))
+        .instance(stage::component(
+            "b",
+            Step {
+                panic_at: Some(2),
+                ..step("b", &log)
+            },
+        ))
+        .instance(stage::component("c", step("c", &log)))
+        .instance(stage::component("spare", step("spare", &log)))
+        .connect("a.out", "b.feed")
+        .connect("b.out", "c.feed")
+        // The spare first in the list: the order comes from the data flow.
+        .thread("control", &["spare", "c", "b", "a"])
+        .substitute("spare", "b")
+        .on_error("b", Policy::Substitute)
+        .build()
+        .expect("base");
+    system.add(base).expect("base");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    tick(&clock);
+    assert_eq!(log.take(), ["a:1", "b:2", "c:3"]);
+    let spare = system.handle_at("base.spare").expect("spare");
+    let mut ticks = 0;
+    while !log.take().contains(&"spare:2".to_owned()) {
+        tick(&clock);
+        ticks += 1;
+        assert!(ticks < 10, "no substitution: {:?}", spare.snapshot());
+    }
+    // Standing in, in one pass: `a`, then the spare with `a`'s packet of this cycle,
+    // then `c` with the spare's.
+    for _ in 0..3 {
+        tick(&clock);
+        assert_eq!(log.take(), ["a:1", "spare:2", "c:3"]);
+    }
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
 #[test]
 fn a_compound_refuses_a_group_that_cannot_run() {
     use coolbot::{CompoundBuilder, CompoundError};
