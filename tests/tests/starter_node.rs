@@ -382,6 +382,13 @@ fn the_starter_main_runs_as_the_robot_or_as_the_station() {
         .filter(|l| l.contains("not queued at shutdown"))
         .collect();
     assert!(warned.is_empty(), "{warned:#?}");
+    // The robot stopped cleanly and sent what the station built for it to `dead`
+    // itself: the station's agent does not report it lost.
+    let lost: Vec<&String> = seen
+        .iter()
+        .filter(|l| l.starts_with("station") && l.contains("here is lost"))
+        .collect();
+    assert!(lost.is_empty(), "{lost:#?}");
 
     // The robot alone: its remote instance's node is not there, so the compound
     // cannot start, and the process says so and fails (it does not wait for nothing,

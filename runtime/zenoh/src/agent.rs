@@ -1567,8 +1567,12 @@ fn owner_lost(
     }
     let mut count = 0;
     let mut name = String::new();
+    // What is `dead` already (an owner that stops cleanly sends its instances there
+    // before it leaves) is released as any dead instance is: the owner left, and
+    // nothing of its is lost here.
     for built in hosted.iter_mut() {
         if built.fate == Fate::Serving
+            && !built.dead()
             && let Some(owner) = &built.owner
             && lost(owner)
         {
