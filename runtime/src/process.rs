@@ -419,6 +419,14 @@ impl Drop for EventWriter {
     }
 }
 
+/// Install the `tracing` subscriber of [`Process::init`] alone, for a program that
+/// needs no signal handling of its own (a command-line tool): lines on stderr, or
+/// kept while output is captured ([`capture_output`]), filtered by `RUST_LOG`, else
+/// by `default` (`EnvFilter` syntax). A subscriber set before stays.
+pub fn init_logs(default: &str) {
+    install_logger(default);
+}
+
 /// The `tracing` subscriber: `RUST_LOG`, else `default`; a `RUST_LOG` that does not
 /// parse is reported and `default` used. A subscriber set before stays.
 fn install_logger(default: &str) {

@@ -250,7 +250,11 @@ fn run(cli: Cli, out: &mut dyn Write) -> Result<bool, CtlError> {
             Ok(true)
         }
         Action::Top { refresh, .. } => {
-            coolbot_zenoh::top::run(&ctl, &session, refresh).map(|()| true)
+            // The terminal is the display's: log lines wait until it is given back.
+            coolbot::process::capture_output(true);
+            let shown = coolbot_zenoh::top::run(&ctl, &session, refresh).map(|()| true);
+            coolbot::process::capture_output(false);
+            shown
         }
         Action::Foxglove {
             bind,
@@ -333,6 +337,9 @@ fn main() -> ExitCode {
         }
     }
     let cli = Cli::parse();
+    // What goes wrong on the way (a packet a Foxglove mapping does not fit, one that
+    // does not decode) is warned about on stderr.
+    coolbot::process::init_logs("warn");
     let stdout = std::io::stdout();
     match run(cli, &mut stdout.lock()) {
         Ok(true) => ExitCode::SUCCESS,

@@ -223,13 +223,25 @@ fn stamp(packet: &Value, path: Option<&str>, sent: coolbot::Time) -> Result<Stam
             nsec: (sent.as_nanos() % 1_000_000_000) as u32,
         }),
         Some(path) => {
-            let nanos = field(packet, path)
-                .and_then(Value::as_u64)
-                .ok_or_else(|| format!("no time stamp (nanoseconds) at `{path}`"))?;
-            Ok(Stamp {
-                sec: nanos / 1_000_000_000,
-                nsec: (nanos % 1_000_000_000) as u32,
-            })
+            let at = field(packet, path);
+            // Nanoseconds since the epoch (a `coolbot::Time`), or a ROS 2
+            // `builtin_interfaces/Time` (`sec`, `nanosec`: a `header.stamp`).
+            if let Some(nanos) = at.and_then(Value::as_u64) {
+                return Ok(Stamp {
+                    sec: nanos / 1_000_000_000,
+                    nsec: (nanos % 1_000_000_000) as u32,
+                });
+            }
+            let part = |name: &str| at.and_then(|at| at.get(name)).and_then(Value::as_u64);
+            match (part("sec"), part("nanosec")) {
+                (Some(sec), Some(nsec)) if nsec < 1_000_000_000 => Ok(Stamp {
+                    sec,
+                    nsec: nsec as u32,
+                }),
+                _ => Err(format!(
+                    "no time stamp at `{path}` (nanoseconds, or `sec` and `nanosec` of a ROS 2 time)"
+                )),
+            }
         }
     }
 }
@@ -531,6 +543,28 @@ mod tests {
             child: "base_link".to_owned(),
             stamp: Some("stamp".to_owned()),
         }
+    }
+
+    #[test]
+    fn a_stamp_is_nanoseconds_or_a_ros_time() {
+        let at = |stamp: Value| stamp(&json!({ "h": { "stamp": stamp } }), Some("h.stamp"), SENT);
+        let ros = at(json!({ "sec": 3, "nanosec": 7 })).unwrap();
+        assert_eq!((ros.sec, ros.nsec), (3, 7));
+        let nanos = at(json!(3_000_000_007u64)).unwrap();
+        assert_eq!((nanos.sec, nanos.nsec), (3, 7));
+        for wrong in [
+            json!({ "sec": -1, "nanosec": 7 }),
+            json!({ "sec": 3, "nanosec": 1_000_000_000u64 }),
+            json!("now"),
+        ] {
+            let refused = at(wrong.clone()).unwrap_err();
+            assert!(
+                refused.starts_with("no time stamp at `h.stamp`"),
+                "{wrong}: {refused}"
+            );
+        }
+        let sent = stamp(&json!({}), None, SENT).unwrap();
+        assert_eq!((sent.sec, sent.nsec), (5, 11));
     }
 
     #[test]

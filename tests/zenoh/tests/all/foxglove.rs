@@ -107,11 +107,13 @@ fn fox() -> Fox {
     }
 }
 
-/// A child process whose stdout lines are read on a thread.
+/// A child process whose stdout and stderr lines are read on threads (its stderr
+/// lines are printed here too).
 struct Process {
     child: Child,
     stdin: Option<ChildStdin>,
     lines: Receiver<String>,
+    errors: Receiver<String>,
 }
 
 impl Process {
@@ -119,12 +121,21 @@ impl Process {
         let mut child = command
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
             .spawn()
             .expect("the process starts");
         let stdout = child.stdout.take().expect("piped stdout");
+        let stderr = child.stderr.take().expect("piped stderr");
         let (sender, lines) = crossbeam_channel::unbounded();
         std::thread::spawn(move || {
             for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                let _ = sender.send(line);
+            }
+        });
+        let (sender, errors) = crossbeam_channel::unbounded();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                eprintln!("{line}");
                 let _ = sender.send(line);
             }
         });
@@ -133,6 +144,20 @@ impl Process {
             child,
             stdin,
             lines,
+            errors,
+        }
+    }
+
+    /// Waits for a stderr line that contains `text`.
+    fn error_line(&self, text: &str) -> String {
+        let deadline = Instant::now() + PATIENCE;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.errors.recv_timeout(left) {
+                Ok(line) if line.contains(text) => return line,
+                Ok(_) => {}
+                Err(error) => panic!("no line with `{text}` on stderr ({error})"),
+            }
         }
     }
 
@@ -770,40 +795,8 @@ fn mapped_outputs_are_foxglove_poses_transforms_paths_and_laser_scans() {
     let Some(modules) = client_modules() else {
         return;
     };
-    let (node, endpoint) = node("rover", &[]);
-    let (hand, outputs) = crossbeam_channel::bounded(1);
-    let mut system = System::new();
-    system
-        .add(rover::component("rover", HandRover(hand)))
-        .unwrap();
-    system.run_all().unwrap();
-    node.expose_system(&system).unwrap();
-    node.echo::<RoverPose>(&system, "rover.pose").unwrap();
-    node.echo::<RoverScan>(&system, "rover.scan").unwrap();
-    let (pose, scan) = outputs.recv_timeout(PATIENCE).expect("the rover started");
-    let sending = Arc::new(AtomicBool::new(true));
-    let running = Arc::clone(&sending);
-    let sender = std::thread::spawn(move || {
-        while running.load(Ordering::Acquire) {
-            pose.send(RoverPose {
-                x: 1.0,
-                y: 2.0,
-                theta: std::f64::consts::FRAC_PI_2,
-            });
-            scan.send(RoverScan {
-                us: [1.0, 2.0, 3.0, 4.0],
-            });
-            std::thread::sleep(Duration::from_millis(10));
-        }
-    });
-    let dir = tempfile::tempdir().expect("a temporary directory");
-    let map = dir.path().join("map.toml");
-    std::fs::write(&map, MAP).expect("write the mapping");
-
-    let (_server, url) = coolctl_foxglove(
-        &["--connect", &endpoint],
-        &["--map", map.to_str().expect("a UTF-8 path")],
-    );
+    let rover = Rover::start();
+    let (_server, url, _dir) = rover.serve(MAP);
     let mut client = Client::start(&modules, &url);
     let channels = client.advertised(&[
         "/rover/rover.pose/pose",
@@ -864,7 +857,8 @@ fn mapped_outputs_are_foxglove_poses_transforms_paths_and_laser_scans() {
 
     // A controllable variable's declared range holds for its parameter.
     let gain = || {
-        system
+        rover
+            .system
             .handle("rover")
             .expect("the rover")
             .snapshot()
@@ -885,8 +879,93 @@ fn mapped_outputs_are_foxglove_poses_transforms_paths_and_laser_scans() {
     let set = client.set_parameter("rover/rover/gain", json!(0.25), true);
     assert_eq!(set.taken(), 0.25);
     assert_eq!(gain(), Some(json!(0.25)));
-    sending.store(false, Ordering::Release);
-    sender.join().expect("the sender ends");
+}
+
+/// A node `rover` whose rover sends its pose and scan every 10 ms, echoed, until
+/// dropped.
+struct Rover {
+    /// Kept open while the rover runs.
+    _node: Node,
+    endpoint: String,
+    system: System,
+    sending: Arc<AtomicBool>,
+    sender: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Rover {
+    fn start() -> Rover {
+        let (node, endpoint) = node("rover", &[]);
+        let (hand, outputs) = crossbeam_channel::bounded(1);
+        let mut system = System::new();
+        system
+            .add(rover::component("rover", HandRover(hand)))
+            .unwrap();
+        system.run_all().unwrap();
+        node.expose_system(&system).unwrap();
+        node.echo::<RoverPose>(&system, "rover.pose").unwrap();
+        node.echo::<RoverScan>(&system, "rover.scan").unwrap();
+        let (pose, scan) = outputs.recv_timeout(PATIENCE).expect("the rover started");
+        let sending = Arc::new(AtomicBool::new(true));
+        let running = Arc::clone(&sending);
+        let sender = std::thread::spawn(move || {
+            while running.load(Ordering::Acquire) {
+                pose.send(RoverPose {
+                    x: 1.0,
+                    y: 2.0,
+                    theta: std::f64::consts::FRAC_PI_2,
+                });
+                scan.send(RoverScan {
+                    us: [1.0, 2.0, 3.0, 4.0],
+                });
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        });
+        Rover {
+            _node: node,
+            endpoint,
+            system,
+            sending,
+            sender: Some(sender),
+        }
+    }
+
+    /// `coolctl foxglove` on this node with the mapping `map`: the server, its URL
+    /// and the directory of the mapping's file.
+    fn serve(&self, map: &str) -> (Process, String, tempfile::TempDir) {
+        let dir = tempfile::tempdir().expect("a temporary directory");
+        let file = dir.path().join("map.toml");
+        std::fs::write(&file, map).expect("write the mapping");
+        let (server, url) = coolctl_foxglove(
+            &["--connect", &self.endpoint],
+            &["--map", file.to_str().expect("a UTF-8 path")],
+        );
+        (server, url, dir)
+    }
+}
+
+impl Drop for Rover {
+    fn drop(&mut self) {
+        self.sending.store(false, Ordering::Release);
+        if let Some(sender) = self.sender.take() {
+            let _ = sender.join();
+        }
+    }
+}
+
+/// A mapping that names a field the packets do not have: each packet it does not
+/// fit is dropped and `coolctl` says so on stderr.
+#[test]
+fn a_packet_a_mapping_does_not_fit_is_warned_about() {
+    let Some(modules) = client_modules() else {
+        return;
+    };
+    let rover = Rover::start();
+    let (server, url, _dir) = rover.serve(&MAP.replace("ranges = \"us\"", "ranges = \"uz\""));
+    let mut client = Client::start(&modules, &url);
+    client.advertised(&["/rover/rover.scan/laser_scan"]);
+    client.order(json!({ "do": "subscribe", "topic": "/rover/rover.scan/laser_scan", "count": 1 }));
+    let line = server.error_line("an echoed packet for /rover/rover.scan/laser_scan does not fit");
+    assert!(line.contains("WARN") && line.contains("uz"), "{line}");
 }
 
 /// Node `name` in a process of its own (`robot-under-test`), running the network
