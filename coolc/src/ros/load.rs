@@ -112,6 +112,15 @@ fn not_found(error: LookupError, file: FileId, span: Span) -> Diagnostic {
                 help.push_str("\nthe standard header is `std_msgs/Header`");
             } else if let Some(near) = shipped::nearest(&name) {
                 help.push_str(&format!("\ndid you mean `{near}`?"));
+            } else {
+                help.push_str(&format!(
+                    "\na type coolc does not ship is read from a directory that holds \
+                     `{}/msg/{}.msg`: give it with `--ros-path DIR` (`Builder::ros_path` in a \
+                     build script), or source the ROS 2 workspace that has it \
+                     (`AMENT_PREFIX_PATH`)",
+                    name.package(),
+                    name.name()
+                ));
             }
             Diagnostic::error(Code::UnknownType, file, span, message).with_help(help)
         }

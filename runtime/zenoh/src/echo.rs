@@ -247,12 +247,14 @@ struct Port<T> {
     port: String,
     /// Attached while a subscriber matches.
     tap: Option<Tap<T>>,
+    /// Whether a subscriber matches the key, as Zenoh's matching listener last said.
+    matched: Arc<AtomicBool>,
+    /// Dropped before the publisher it listens to (fields drop in order): Zenoh logs
+    /// an error for a listener whose publisher is gone.
+    _listener: zenoh::matching::MatchingListener<()>,
     /// Declared on the output's key for its matching status only: the packets go in
     /// the node's batch.
     _publisher: zenoh::pubsub::Publisher<'static>,
-    /// Whether a subscriber matches the key, as Zenoh's matching listener last said.
-    matched: Arc<AtomicBool>,
-    _listener: zenoh::matching::MatchingListener<()>,
 }
 
 impl<T: Packet + Serialize> Echoing for Port<T> {

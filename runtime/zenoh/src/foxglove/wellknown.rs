@@ -547,7 +547,7 @@ mod tests {
 
     #[test]
     fn a_stamp_is_nanoseconds_or_a_ros_time() {
-        let at = |stamp: Value| stamp(&json!({ "h": { "stamp": stamp } }), Some("h.stamp"), SENT);
+        let at = |time: Value| stamp(&json!({ "h": { "stamp": time } }), Some("h.stamp"), SENT);
         let ros = at(json!({ "sec": 3, "nanosec": 7 })).unwrap();
         assert_eq!((ros.sec, ros.nsec), (3, 7));
         let nanos = at(json!(3_000_000_007u64)).unwrap();

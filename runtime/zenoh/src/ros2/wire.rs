@@ -304,11 +304,13 @@ fn check_token(what: &'static str, name: &str, token: &str) -> Result<(), BadNam
         .chars()
         .find(|c| !c.is_ascii_alphanumeric() && *c != '_')
     {
-        return Err(bad(
-            what,
-            name,
-            format!("`{c}`: only letters, digits, `_` and `/` are allowed"),
-        ));
+        let allowed = if what == "node name" {
+            "only letters, digits and `_` are allowed (a node name is one token: the \
+             rest of a path goes in the namespace)"
+        } else {
+            "only letters, digits, `_` and `/` are allowed"
+        };
+        return Err(bad(what, name, format!("`{c}`: {allowed}")));
     }
     if token.starts_with(|c: char| c.is_ascii_digit()) {
         return Err(bad(
@@ -349,6 +351,21 @@ pub fn check_namespace(namespace: &str) -> Result<(), BadName> {
 /// (`/scan`), a relative one under the namespace (`scan` in `/robot` is
 /// `/robot/scan`). A private name (`~/x`) and substitutions (`{node}`) are refused.
 pub fn qualify(namespace: &str, topic: &str) -> Result<String, BadName> {
+    if topic.starts_with('~') {
+        return Err(bad(
+            "topic name",
+            topic,
+            "a private name (`~/...`) is not supported: give it relative to the \
+             namespace, or absolute",
+        ));
+    }
+    if topic.contains(['{', '}']) {
+        return Err(bad(
+            "topic name",
+            topic,
+            "substitutions (`{node}`, `{ns}`) are not supported",
+        ));
+    }
     let full = if topic.starts_with('/') {
         topic.to_owned()
     } else if namespace == "/" {
@@ -543,7 +560,15 @@ mod tests {
         }
         check_node_name("base_1").unwrap();
         assert!(check_node_name("1base").is_err());
-        assert!(check_node_name("a/b").is_err());
+        let slash = check_node_name("a/b").unwrap_err();
+        assert!(slash.reason.contains("a node name is one token"), "{slash}");
+        let private = qualify("/", "~/scan").unwrap_err();
+        assert!(private.reason.starts_with("a private name"), "{private}");
+        let substituted = qualify("/", "/{node}/x").unwrap_err();
+        assert!(
+            substituted.reason.starts_with("substitutions"),
+            "{substituted}"
+        );
         check_namespace("/").unwrap();
         check_namespace("/robot/left").unwrap();
         for wrong in ["robot", "/robot/", "//"] {
