@@ -9,7 +9,7 @@
 
 use crate::generated::{{ c.module }}::*;
 
-/// What a `{{ c.type_name }}` keeps between sections.
+/// What `{{ c.type_name }}` keeps between sections.
 #[derive(Debug, Default)]
 pub struct {{ c.user_struct }} {}
 {% if c.methods.is_empty() %}
