@@ -5,7 +5,7 @@
 use std::sync::atomic::Ordering;
 
 use crate::automaton::{Context, Fault};
-use crate::monitor::MonitorEvent;
+use crate::monitor::{MonitorEvent, Step};
 use crate::table::State;
 
 use super::reads::{Changed, Reads};
@@ -200,8 +200,20 @@ impl Compound {
                     outcome.map_err(|fault| self.propagated(index, fault))?;
                 }
                 Status::Recovering if failed => {
-                    if let Some(entry) = self.queue.iter_mut().find(|e| e.instance == index) {
-                        entry.probation = false;
+                    // Restarted by a retry, it failed again before it could count as
+                    // recovered: a step says so; the next retry comes as before.
+                    let on_probation = self
+                        .queue
+                        .iter_mut()
+                        .find(|e| e.instance == index)
+                        .is_some_and(|entry| std::mem::take(&mut entry.probation));
+                    if on_probation {
+                        let error = self.view.instances[index].error.clone().unwrap_or_default();
+                        self.step(
+                            index,
+                            Step::Failed,
+                            format!("again, on probation after a retry: {error}"),
+                        );
                     }
                 }
                 _ => {}

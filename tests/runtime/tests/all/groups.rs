@@ -22,6 +22,8 @@ struct Step {
     count: u64,
     /// Panic in this period (counting from 1).
     panic_at: Option<u64>,
+    /// Panic in every period from this one on (counting from 1).
+    panic_from: Option<u64>,
     /// In this period, let the clock run on 20 ms inside the section (an overrun of
     /// the 5 ms `max_response`).
     overrun_at: Option<(u64, Arc<VirtualClock>)>,
@@ -30,7 +32,9 @@ struct Step {
 impl stage::Behavior for Step {
     fn work_periodic(&mut self, cx: &mut stage::Cx<'_>) -> SectionResult {
         self.count += 1;
-        if self.panic_at == Some(self.count) {
+        if self.panic_at == Some(self.count)
+            || self.panic_from.is_some_and(|from| self.count >= from)
+        {
             panic!("{} broke", self.name);
         }
         if let Some((at, clock)) = &self.overrun_at
@@ -80,6 +84,7 @@ fn step(name: &'static str, log: &Log) -> Step {
         log: log.clone(),
         count: 0,
         panic_at: None,
+        panic_from: None,
         overrun_at: None,
     }
 }
@@ -695,6 +700,82 @@ fn a_substitute_in_the_group_runs_in_its_originals_place_in_the_flow() {
         tick(&clock);
         assert_eq!(log.take(), ["a:1", "spare:2", "c:3"]);
     }
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+/// A member that fails again while on probation after a recovery retry is a step
+/// of its own (`Failed`, "again, on probation after a retry", with its error), and
+/// the queue retries it again.
+#[test]
+fn a_member_that_fails_again_on_probation_is_a_step() {
+    use coolbot::{CompoundBuilder, MonitorEvent, Policy, Step as Done, Supervision};
+    use coolbot_runtime_tests::supervision::Coordinating;
+    let log = Log::default();
+    let (mut system, clock) = system();
+    let base = CompoundBuilder::new("base", Coordinating)
+        .instance(stage::component("a", step("a", &log)))
+        .instance(stage::component(
+            "b",
+            Step {
+                panic_from: Some(2),
+                ..step("b", &log)
+            },
+        ))
+        .instance(stage::component("c", step("c", &log)))
+        .instance(stage::component("spare", step("spare", &log)))
+        .connect("a.out", "b.feed")
+        .connect("b.out", "c.feed")
+        .thread("control", &["a", "b", "c"])
+        .substitute("spare", "b")
+        .on_error("b", Policy::Substitute)
+        .recovery(PERIOD * 3, Duration::from_secs(10))
+        .build()
+        .expect("base");
+    let base = system.add(base).expect("base");
+    let events = base.subscribe();
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    // The steps about `b`, as published, until `count` of them are in.
+    let mut steps: Vec<Supervision> = Vec::new();
+    let until = |count: usize, steps: &mut Vec<Supervision>| {
+        let deadline = std::time::Instant::now() + Duration::from_secs(60);
+        while steps.len() < count {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match events.recv_timeout(left) {
+                Ok(MonitorEvent::Supervision(step)) if step.instance == "b" => steps.push(step),
+                Ok(_) => {}
+                Err(_) => panic!("{} step(s) about b: {steps:?}", steps.len()),
+            }
+        }
+    };
+    // Fails in its second period: substituted and queued.
+    tick(&clock);
+    tick(&clock);
+    until(3, &mut steps);
+    assert_eq!(steps[0].step, Done::Failed);
+    // The retry (three periods later) runs it again; its next period fails it again.
+    for _ in 0..3 {
+        tick(&clock);
+    }
+    until(4, &mut steps);
+    assert_eq!(steps[3].step, Done::Retried, "{steps:?}");
+    tick(&clock);
+    until(5, &mut steps);
+    assert_eq!(steps[4].step, Done::Failed, "{steps:?}");
+    assert!(
+        steps[4]
+            .detail
+            .starts_with("again, on probation after a retry: ")
+            && steps[4].detail.contains("b broke"),
+        "{steps:?}"
+    );
+    // And the queue retries it again.
+    for _ in 0..3 {
+        tick(&clock);
+    }
+    until(6, &mut steps);
+    assert_eq!(steps[5].step, Done::Retried, "{steps:?}");
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
