@@ -104,6 +104,9 @@ fn cells(row: &Row) -> Vec<String> {
 /// The thread column's index: a group's name, or `own`.
 const THREAD: usize = 11;
 
+/// The user state's column.
+const USER: usize = 2;
+
 const HEADER: [&str; 13] = [
     "COMPONENT",
     "STATE",
@@ -184,12 +187,21 @@ pub fn draw(frame: &mut Frame<'_>, board: &Board) {
         .max()
         .unwrap_or(0)
         .clamp(HEADER[THREAD].len(), 16);
+    // The user state column fits the longest user state, up to 16.
+    let user = board
+        .rows()
+        .iter()
+        .map(|row| cells(row)[USER].chars().count())
+        .max()
+        .unwrap_or(0)
+        .clamp(HEADER[USER].len(), 16);
     let widths: Vec<Constraint> = shown(
         threads,
         vec![
             Constraint::Length(first),
-            Constraint::Length(13),
-            Constraint::Length(10),
+            // The longest state: `starting_error`.
+            Constraint::Length(14),
+            Constraint::Length(u16::try_from(user).unwrap_or(16)),
             Constraint::Length(10),
             Constraint::Length(2),
             Constraint::Length(4),
