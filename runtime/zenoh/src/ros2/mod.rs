@@ -285,13 +285,14 @@ impl Participant {
 
     /// Publish what the output `output` (`instance.port`) of `system` sends on
     /// `topic`, with the default QoS: adds a publisher named after the topic
-    /// (`ros2_pub_<topic>`) and connects the output to it. Works before and while the
+    /// (`ros2_pub_<topic>`, its slashes as `_`; `_2`, `_3`, ... after it when that
+    /// name is taken) and connects the output to it. Works before and while the
     /// system runs.
     pub fn publish<T>(&self, system: &mut System, topic: &str, output: &str) -> Result<(), RosError>
     where
         T: RosType + Packet + Serialize,
     {
-        let name = component_name("pub", topic);
+        let name = component_name(system, "pub", topic);
         let component = self.publisher::<T>(&name, topic).build()?;
         add(system, component, &name)?;
         system
@@ -305,7 +306,8 @@ impl Participant {
 
     /// Deliver what arrives on `topic` at the input `input` (`instance.port`) of
     /// `system`, with the default QoS: adds a subscription named after the topic
-    /// (`ros2_sub_<topic>`) and connects it to the input.
+    /// (`ros2_sub_<topic>`, named as [`Participant::publish`] names its publisher)
+    /// and connects it to the input.
     pub fn subscribe<T>(
         &self,
         system: &mut System,
@@ -315,7 +317,7 @@ impl Participant {
     where
         T: RosType + Packet + DeserializeOwned,
     {
-        let name = component_name("sub", topic);
+        let name = component_name(system, "sub", topic);
         let component = self.subscriber::<T>(&name, topic).build()?;
         add(system, component, &name)?;
         system
@@ -341,7 +343,7 @@ impl Participant {
         A: Packet,
         T: RosType + Packet + Serialize,
     {
-        let name = component_name("pub", topic);
+        let name = component_name(system, "pub", topic);
         let component = self.publisher::<T>(&name, topic).build()?;
         add(system, component, &name)?;
         system
@@ -367,7 +369,7 @@ impl Participant {
         T: RosType + Packet + DeserializeOwned,
         B: Packet,
     {
-        let name = component_name("sub", topic);
+        let name = component_name(system, "sub", topic);
         let component = self.subscriber::<T>(&name, topic).build()?;
         add(system, component, &name)?;
         system
@@ -432,12 +434,21 @@ impl Participant {
     }
 }
 
-/// `ros2_<kind>_<topic>`, the topic's slashes as `_`.
-fn component_name(kind: &str, topic: &str) -> String {
-    format!(
+/// `ros2_<kind>_<topic>`, the topic's slashes as `_`; when `system` has a component
+/// of that name already (`/a/b` and `/a_b` make the same name, and a topic may have
+/// two publishers), the first of `_2`, `_3`, ... after it that is free.
+fn component_name(system: &System, kind: &str, topic: &str) -> String {
+    let name = format!(
         "ros2_{kind}_{}",
         topic.trim_start_matches('/').replace('/', "_")
-    )
+    );
+    if system.handle(&name).is_none() {
+        return name;
+    }
+    (2..)
+        .map(|n| format!("{name}_{n}"))
+        .find(|candidate| system.handle(candidate).is_none())
+        .unwrap_or(name)
 }
 
 fn add(system: &mut System, component: Component, name: &str) -> Result<(), RosError> {
@@ -771,5 +782,23 @@ impl Automaton for RosSubscriber {
 
     fn stop(&mut self, _cx: &mut Context) {
         self.subscriber = None;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::component_name;
+    use crate::testing::{idle, idle_spec};
+
+    #[test]
+    fn a_bridges_name_is_the_topics_and_the_next_free_one_when_that_is_taken() {
+        let mut system = coolbot::System::new();
+        assert_eq!(component_name(&system, "pub", "/a/b"), "ros2_pub_a_b");
+        system.add(idle("ros2_pub_a_b", idle_spec())).unwrap();
+        // `/a_b` makes the same name: the next free one.
+        assert_eq!(component_name(&system, "pub", "/a_b"), "ros2_pub_a_b_2");
+        system.add(idle("ros2_pub_a_b_2", idle_spec())).unwrap();
+        assert_eq!(component_name(&system, "pub", "a/b"), "ros2_pub_a_b_3");
+        assert_eq!(component_name(&system, "sub", "/a/b"), "ros2_sub_a_b");
     }
 }
