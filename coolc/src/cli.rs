@@ -403,7 +403,9 @@ fn compile(
     };
     let krate = lower::lower(&checked, &options);
     timings.span("lower");
-    left_out(out, files, &checked, &krate)?;
+    if !write.check {
+        left_out(out, files, &checked, &krate)?;
+    }
     let report = merge::write_crate_with(out, &krate, write)
         .map_err(|e| Failure::Usage(format!("cannot write {}: {e}", out.display())))?;
     if write.check {
@@ -462,8 +464,8 @@ fn left_out(
             let name = user.file_name().unwrap_or_default();
             format!(
                 "{} (which {} uses)",
-                shown(&Path::new("src/generated").join(name)),
-                shown(user)
+                shown(&out.join("src/generated").join(name)),
+                shown(&out.join(user))
             )
         })
         .collect();
@@ -474,8 +476,9 @@ fn left_out(
         .collect();
     Err(Failure::Usage(format!(
         "this compile would remove {}, and {} in the crate is not among its descriptions: \
-         compile every description of the crate together (coolc compile {} -o {}), or \
-         delete the description of a component you are removing. Nothing was written.",
+         compile every description of the crate together (coolc compile {} -o {}); a \
+         component meant to go: delete its description, or its user file and its `pub mod` \
+         line in src/lib.rs. Nothing was written.",
         removed.join(", "),
         undescribed
             .iter()
@@ -487,8 +490,9 @@ fn left_out(
     )))
 }
 
-/// The `.cool` files under `dir`, not in `target/` or a hidden directory (at most a
-/// few levels down: the crate's own directories).
+/// The `.cool` files of the crate at `dir`: under it, not in `target/`, a hidden
+/// directory, another crate (a directory with a `Cargo.toml`) or a linked directory,
+/// at most a few levels down.
 fn descriptions_under(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) {
     const DEPTH: usize = 4;
     let Ok(entries) = std::fs::read_dir(dir) else {
@@ -498,11 +502,18 @@ fn descriptions_under(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) {
         let path = entry.path();
         let name = entry.file_name();
         let name = name.to_string_lossy();
-        if path.is_dir() {
-            if depth < DEPTH && !name.starts_with('.') && name != "target" {
+        let Ok(kind) = entry.file_type() else {
+            continue;
+        };
+        if kind.is_dir() {
+            if depth < DEPTH
+                && !name.starts_with('.')
+                && name != "target"
+                && !path.join("Cargo.toml").exists()
+            {
                 descriptions_under(&path, depth + 1, found);
             }
-        } else if path.extension().is_some_and(|e| e == "cool") {
+        } else if kind.is_file() && path.extension().is_some_and(|e| e == "cool") {
             found.push(path);
         }
     }

@@ -240,41 +240,45 @@ pub(crate) fn merge_modules(
     if missing.is_empty() {
         return Ok((text, missing));
     }
+    // The file's own line ending.
+    let ending = if lib_rs.contains("\r\n") {
+        "\r\n"
+    } else {
+        "\n"
+    };
     if !text.ends_with('\n') {
-        text.push('\n');
+        text.push_str(ending);
     }
     for module in &missing {
-        text.push_str(&format!("pub mod {module};\n"));
+        text.push_str(&format!("pub mod {module};{ending}"));
     }
     Ok((sort_last_modules(&text), missing))
 }
 
-/// `text` with its last run of `pub mod name;` lines in the order rustfmt gives
-/// module declarations (by name, `r#` aside), so that the modules coolc adds leave
-/// the file as `cargo fmt` would.
+/// `text` with its last run of plain `pub mod name;` lines in the order rustfmt gives
+/// module declarations (by name, `r#` aside), so that the modules coolc adds to the
+/// lines it writes keep them in `cargo fmt`'s order. Every line keeps its ending
+/// (`text` ends with a line ending: the caller adds one).
 fn sort_last_modules(text: &str) -> String {
-    let lines: Vec<&str> = text.lines().collect();
+    // Lines with their endings (`\n` or `\r\n`), as the file has them.
+    let lines: Vec<&str> = text.split_inclusive('\n').collect();
     let declaration = |line: &str| {
-        line.strip_prefix("pub mod ")
+        line.trim_end_matches(['\r', '\n'])
+            .strip_prefix("pub mod ")
             .and_then(|rest| rest.strip_suffix(';'))
+            .map(|name| name.strip_prefix("r#").unwrap_or(name))
             .filter(|name| {
-                let name = name.strip_prefix("r#").unwrap_or(name);
                 !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
             })
-            .map(|name| name.strip_prefix("r#").unwrap_or(name).to_owned())
+            .map(str::to_owned)
     };
-    let end = lines.len();
     let start = lines
         .iter()
         .rposition(|line| declaration(line).is_none())
         .map_or(0, |i| i + 1);
-    let mut run = lines[start..end].to_vec();
+    let mut run = lines[start..].to_vec();
     run.sort_by_key(|line| declaration(line));
-    let mut sorted: Vec<&str> = lines[..start].to_vec();
-    sorted.extend(run);
-    let mut out = sorted.join("\n");
-    out.push('\n');
-    out
+    lines[..start].concat() + &run.concat()
 }
 
 /// How [`write_crate_with`] writes.
@@ -834,7 +838,9 @@ pub(crate) fn orphaned_user_files(dir: &Path, krate: &ir::Crate) -> Vec<PathBuf>
             let user = Path::new("src").join(entry.file_name());
             (path.extension().is_some_and(|e| e == "rs")
                 && !NOT_MODULES.contains(&stem.as_str())
-                && !modules.contains(&stem)
+                && !modules
+                    .iter()
+                    .any(|module| module.trim_start_matches("r#") == stem)
                 && dir.join(&user).is_file()
                 && fs::read_to_string(&path).is_ok_and(|text| text.starts_with(GENERATED_HEADER)))
             .then_some(user)
@@ -924,6 +930,12 @@ mod tests {
             text,
             "//! Doc.\n\npub mod generated;\n\npub mod aB;\npub mod a_b;\npub mod camera;\n\
              pub mod estimator;\npub mod r#loop;\npub mod sensor;\n"
+        );
+        // Lines ending in `\r\n` keep their ending.
+        let (crlf, _) = merge_modules("//! Doc.\r\n\r\npub mod b;\r\n", &modules[..2]).unwrap();
+        assert_eq!(
+            crlf,
+            "//! Doc.\r\n\r\npub mod b;\r\npub mod estimator;\r\npub mod sensor;\r\n"
         );
         // Nothing to add: the file as it was, order included.
         let (same, added) = merge_modules("pub mod b;\npub mod a;", &modules[..0]).unwrap();

@@ -538,6 +538,10 @@ pub struct System {
     /// Connections a compound makes when it starts, after its groups' threads have
     /// started: each group's data-flow order counts them as made.
     planned: Vec<Link>,
+    /// The connections a compound's substitutes take when they stand in: an
+    /// execution group orders its members with them too, when they leave an order
+    /// (they never make a group refuse to start).
+    stand_ins: Vec<Link>,
     groups: Vec<GroupSlot>,
     started: bool,
     /// The clock the components' timers read (`crate::clock`).
@@ -784,6 +788,7 @@ impl System {
             names: HashMap::new(),
             links: Vec::new(),
             planned: Vec::new(),
+            stand_ins: Vec::new(),
             groups: Vec::new(),
             started: false,
             clock: Clock::real(),
@@ -995,17 +1000,25 @@ impl System {
     /// members, a cycle with nothing to break it), with the connections `planned`
     /// (`(output, input)` addresses: a compound's, made when it starts, after its
     /// groups' threads have started) as if made; keep them, so that each group's
-    /// data-flow order counts them when its thread starts.
-    pub(crate) fn plan_groups(&mut self, planned: &[(&str, &str)]) -> Result<(), Error> {
-        let planned: Vec<Link> = planned
-            .iter()
-            .filter_map(|(from, to)| {
-                Some(Link {
-                    from: self.parse(from, true).ok()?,
-                    to: self.parse(to, false).ok()?,
+    /// data-flow order counts them when its thread starts; and the connections
+    /// `stand_ins` its substitutes take when they stand in, which the order counts
+    /// too when it can (see `System::stand_ins`).
+    pub(crate) fn plan_groups(
+        &mut self,
+        planned: &[(&str, &str)],
+        stand_ins: &[(&str, &str)],
+    ) -> Result<(), Error> {
+        let links = |ends: &[(&str, &str)]| -> Vec<Link> {
+            ends.iter()
+                .filter_map(|(from, to)| {
+                    Some(Link {
+                        from: self.parse(from, true).ok()?,
+                        to: self.parse(to, false).ok()?,
+                    })
                 })
-            })
-            .collect();
+                .collect()
+        };
+        let (planned, stand_ins) = (links(planned), links(stand_ins));
         for group in 0..self.groups.len() {
             self.group_order(group, &planned)
                 .map_err(|source| Error::Group {
@@ -1014,6 +1027,7 @@ impl System {
                 })?;
         }
         self.planned = planned;
+        self.stand_ins = stand_ins;
         Ok(())
     }
 
@@ -1039,6 +1053,15 @@ impl System {
                 group: self.groups[group].name.clone(),
                 source,
             })?;
+        // A substitute among the members runs where its original's connections put
+        // it, if those leave an order; otherwise the order stands as it is.
+        let order = if self.stand_ins.is_empty() {
+            order
+        } else {
+            let mut with = self.planned.clone();
+            with.extend(self.stand_ins.iter().cloned());
+            self.group_order(group, &with).unwrap_or(order)
+        };
         let mut runners = Vec::with_capacity(order.len());
         for index in &order {
             if let Some(mut runner) = self.slots[*index].runner.take() {

@@ -824,4 +824,25 @@ fn a_compile_that_leaves_out_a_description_of_the_crate_is_refused() {
         "{stderr}"
     );
     assert!(!krate.join("src/generated/blinker.rs").exists());
+    // A component whose module is a keyword (`r#loop`), compiled with a draft lying
+    // elsewhere in the crate: nothing would be removed, nothing is refused.
+    std::fs::write(
+        krate.join("components/loop.cool"),
+        blinker.replace("Blinker", "Loop"),
+    )
+    .unwrap();
+    let both = [
+        "compile",
+        "components/pulse.cool",
+        "components/loop.cool",
+        "-o",
+        ".",
+    ];
+    let out = coolc(&both, &krate);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    std::fs::create_dir_all(krate.join("drafts")).unwrap();
+    std::fs::write(krate.join("drafts/draft.cool"), "atomic Draft {}\n").unwrap();
+    let out = coolc(&both, &krate);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(krate.join("src/generated/loop.rs").is_file());
 }

@@ -599,7 +599,8 @@ impl CompoundBuilder {
         // A substitute has no connections of its own until it stands in: in an
         // execution group it runs where its original's would put it (after what
         // feeds the original, before what the original feeds), so that standing in
-        // it is in the same cycle's flow.
+        // it is in the same cycle's flow. Its connections only order the group: they
+        // never make it refuse to start.
         let made: Vec<(&str, &str)> = self.links.iter().map(Link::ends).collect();
         let stand_ins: Vec<(String, String)> = self
             .substitutes
@@ -620,13 +621,11 @@ impl CompoundBuilder {
                     })
             })
             .collect();
-        let mut planned = made.clone();
-        planned.extend(
-            stand_ins
-                .iter()
-                .map(|(from, to)| (from.as_str(), to.as_str())),
-        );
-        if let Err(source) = self.system.plan_groups(&planned) {
+        let stand_ins: Vec<(&str, &str)> = stand_ins
+            .iter()
+            .map(|(from, to)| (from.as_str(), to.as_str()))
+            .collect();
+        if let Err(source) = self.system.plan_groups(&made, &stand_ins) {
             return Err(CompoundError::Instance {
                 compound: self.name.clone(),
                 source: Box::new(source),

@@ -338,8 +338,9 @@ fn main() -> ExitCode {
     }
     let cli = Cli::parse();
     // What goes wrong on the way (a packet a Foxglove mapping does not fit, one that
-    // does not decode) is warned about on stderr.
-    coolbot::process::init_logs("warn");
+    // does not decode) is warned about on stderr; Zenoh's own warnings (no peer
+    // found by scouting) are not coolctl's to give: only its errors.
+    coolbot::process::init_logs("warn,zenoh=error");
     let stdout = std::io::stdout();
     match run(cli, &mut stdout.lock()) {
         Ok(true) => ExitCode::SUCCESS,

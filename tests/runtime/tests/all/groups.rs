@@ -704,6 +704,34 @@ fn a_substitute_in_the_group_runs_in_its_originals_place_in_the_flow() {
     assert!(report.clean(), "{report:?}");
 }
 
+/// A substitute's connections only order its group: when, standing in for an
+/// original outside the group, they would close a cycle of queues among the members
+/// (here `r1 -> orig -> r1`, with `spare` beside `r1`), the group still starts, in the
+/// order of its own connections.
+#[test]
+fn a_substitutes_connections_never_make_its_group_refuse_to_start() {
+    use coolbot::{CompoundBuilder, Policy};
+    use coolbot_runtime_tests::supervision::Coordinating;
+    let log = Log::default();
+    let (mut system, clock) = system();
+    let base = CompoundBuilder::new("base", Coordinating)
+        .instance(relay::component("r1", hop("r1", &log)))
+        .instance(relay::component("orig", hop("orig", &log)))
+        .instance(relay::component("spare", hop("spare", &log)))
+        .connect("r1.out", "orig.feed")
+        .connect("orig.out", "r1.feed")
+        .thread("loop", &["r1", "spare"])
+        .substitute("spare", "orig")
+        .on_error("orig", Policy::Substitute)
+        .build()
+        .expect("the group's own connections make no cycle");
+    system.add(base).expect("base");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
 /// A member that fails again while on probation after a recovery retry is a step
 /// of its own (`Failed`, "again, on probation after a retry", with its error), and
 /// the queue retries it again.
