@@ -68,10 +68,26 @@ impl Runner {
                 }
             }
             Command::Set(name, value) => match self.spec.variable_index(name) {
-                None => reply(Reply::Rejected(format!(
-                    "no variable `{}`",
-                    excerpt(name, EXCERPT_CHARS)
-                ))),
+                None => {
+                    // What can be set, and what else the name may be meant for.
+                    let settable: Vec<&str> = self
+                        .spec
+                        .variables
+                        .iter()
+                        .filter(|variable| variable.kind == VarKind::Controllable)
+                        .map(|variable| variable.name)
+                        .collect();
+                    let has = if settable.is_empty() {
+                        "it has no controllable variable".to_owned()
+                    } else {
+                        format!("its controllable variables: {}", settable.join(", "))
+                    };
+                    reply(Reply::Rejected(format!(
+                        "no variable `{}` ({has}; a configuration field is changed with \
+                         `configure`)",
+                        excerpt(name, EXCERPT_CHARS)
+                    )))
+                }
                 Some(index) if self.spec.variables[index].kind != VarKind::Controllable => reply(
                     Reply::Rejected(format!("`{name}` is observable, not controllable")),
                 ),

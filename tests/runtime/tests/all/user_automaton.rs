@@ -177,7 +177,11 @@ fn variables_are_published_and_controllable_ones_set() {
         .handle
         .command(Command::Set("speed".to_owned(), Value::UInt(0)))
         .unwrap_err();
-    assert_eq!(err.reason, "no variable `speed`");
+    assert_eq!(
+        err.reason,
+        "no variable `speed` (its controllable variables: gain; a configuration field is \
+         changed with `configure`)"
+    );
     let err = rig
         .handle
         .command(Command::Set("gain".to_owned(), Value::Str("x".to_owned())))
