@@ -441,10 +441,55 @@ fn merge_user_file(
             )),
         }
     }
+    let wanted: Vec<&str> = sets
+        .get(file.path.as_path())
+        .into_iter()
+        .flatten()
+        .map(|set| set.trait_name.as_str())
+        .collect();
+    let left = blocks_no_longer_wanted(&merged_text, &wanted);
+    if !left.is_empty() {
+        result.warnings.push(format!(
+            "{} implements {} for a component that no longer has it (an atomic component \
+             made a compound, or the other way round): remove that block; src/main.rs may \
+             need the same change (coolc's current one: .coolc/stubs/src/main.rs)",
+            file.path.display(),
+            left.iter()
+                .map(|name| format!("`{name}`"))
+                .collect::<Vec<_>>()
+                .join(" and ")
+        ));
+    }
     if !result.added.is_empty() {
         writer.write(&path, &merged_text)?;
     }
     Ok(result)
+}
+
+/// The traits of a component's user file (`Behavior`; a compound's `Supervisor` and
+/// `Parts`) that `text` implements, by their bare names, but `wanted` does not name.
+fn blocks_no_longer_wanted(text: &str, wanted: &[&str]) -> Vec<String> {
+    const COMPONENT_TRAITS: [&str; 3] = ["Behavior", "Supervisor", "Parts"];
+    let Ok(file) = syn::parse_file(text) else {
+        return Vec::new();
+    };
+    let mut left: Vec<String> = file
+        .items
+        .iter()
+        .filter_map(|item| match item {
+            syn::Item::Impl(block) => block.trait_.as_ref(),
+            _ => None,
+        })
+        // Unqualified, as coolc writes them (`stage::Behavior` in a compound's file
+        // is an instance's behaviour, not the compound's).
+        .filter(|(_, path, _)| path.leading_colon.is_none() && path.segments.len() == 1)
+        .filter_map(|(_, path, _)| path.segments.last().map(|s| s.ident.to_string()))
+        .filter(|name| {
+            COMPONENT_TRAITS.contains(&name.as_str()) && !wanted.contains(&name.as_str())
+        })
+        .collect();
+    left.dedup();
+    left
 }
 
 /// Where the format cache lives inside the crate.

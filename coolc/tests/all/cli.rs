@@ -846,3 +846,36 @@ fn a_compile_that_leaves_out_a_description_of_the_crate_is_refused() {
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     assert!(krate.join("src/generated/loop.rs").is_file());
 }
+
+#[test]
+fn an_atomic_component_made_a_compound_is_told_its_old_block_is_left() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = coolc(&["new", "scanbot"], dir.path());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let krate = dir.path().join("scanbot");
+    std::fs::write(
+        krate.join("components/scanbot.cool"),
+        "packet Twist { v: f64, w: f64 }\n\
+         atomic Lidar { output scan: data<Twist>; }\n\
+         atomic Avoider { input scan: fifo<Twist>(4); }\n\
+         compound Scanbot {\n    instance lidar: Lidar;\n    instance avoider: Avoider;\n    \
+         connect lidar.scan -> avoider.scan;\n}\n",
+    )
+    .unwrap();
+    let out = coolc(&["compile", "components/scanbot.cool", "-o", "."], &krate);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains(
+            "warning: src/scanbot.rs implements `Behavior` for a component that no longer has it"
+        ) && stderr.contains(".coolc/stubs/src/main.rs"),
+        "{stderr}"
+    );
+    // The compound's own blocks were added; an atomic's file gets no such warning.
+    let user = std::fs::read_to_string(krate.join("src/scanbot.rs")).unwrap();
+    assert!(
+        user.contains("impl Supervisor for") && user.contains("impl Parts for"),
+        "{user}"
+    );
+    assert!(!stderr.contains("src/lidar.rs implements"), "{stderr}");
+}
