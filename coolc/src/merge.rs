@@ -488,6 +488,7 @@ fn blocks_no_longer_wanted(text: &str, wanted: &[&str]) -> Vec<String> {
             COMPONENT_TRAITS.contains(&name.as_str()) && !wanted.contains(&name.as_str())
         })
         .collect();
+    left.sort();
     left.dedup();
     left
 }

@@ -77,10 +77,18 @@ impl Runner {
                         .filter(|variable| variable.kind == VarKind::Controllable)
                         .map(|variable| variable.name)
                         .collect();
-                    let has = if settable.is_empty() {
-                        "it has no controllable variable".to_owned()
-                    } else {
-                        format!("its controllable variables: {}", settable.join(", "))
+                    /// How many of them the reason names.
+                    const NAMED: usize = 8;
+                    let has = match settable.len() {
+                        0 => "it has no controllable variable".to_owned(),
+                        n if n <= NAMED => {
+                            format!("its controllable variables: {}", settable.join(", "))
+                        }
+                        n => format!(
+                            "its controllable variables: {} and {} more",
+                            settable[..NAMED].join(", "),
+                            n - NAMED
+                        ),
                     };
                     reply(Reply::Rejected(format!(
                         "no variable `{}` ({has}; a configuration field is changed with \
