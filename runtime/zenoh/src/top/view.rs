@@ -107,6 +107,19 @@ const THREAD: usize = 11;
 /// The user state's column.
 const USER: usize = 2;
 
+/// The width of column `column`: its longest cell, at least its header, at most
+/// `most`.
+fn fitted(board: &Board, column: usize, most: usize) -> u16 {
+    let longest = board
+        .rows()
+        .iter()
+        .map(|row| cells(row)[column].chars().count())
+        .max()
+        .unwrap_or(0)
+        .clamp(HEADER[column].len(), most.max(HEADER[column].len()));
+    u16::try_from(longest).unwrap_or(u16::MAX)
+}
+
 const HEADER: [&str; 13] = [
     "COMPONENT",
     "STATE",
@@ -168,40 +181,17 @@ pub fn draw(frame: &mut Frame<'_>, board: &Board) {
         };
         TableRow::new(shown(threads, cells(row)).map(Cell::from)).style(style)
     });
-    // The component column fits the longest name, up to half the screen.
-    let longest = board
-        .rows()
-        .iter()
-        .map(|row| cells(row)[0].chars().count())
-        .max()
-        .unwrap_or(0)
-        .max(HEADER[0].len());
-    let first = u16::try_from(longest)
-        .unwrap_or(u16::MAX)
-        .min(area.width / 2);
-    // The thread column fits the longest group name, up to 16.
-    let thread = board
-        .rows()
-        .iter()
-        .map(|row| cells(row)[THREAD].chars().count())
-        .max()
-        .unwrap_or(0)
-        .clamp(HEADER[THREAD].len(), 16);
-    // The user state column fits the longest user state, up to 16.
-    let user = board
-        .rows()
-        .iter()
-        .map(|row| cells(row)[USER].chars().count())
-        .max()
-        .unwrap_or(0)
-        .clamp(HEADER[USER].len(), 16);
+    // The component column fits the longest name, up to half the screen; the user
+    // state and thread columns their longest, up to 16.
+    let first = fitted(board, 0, usize::MAX).min(area.width / 2);
+    let (user, thread) = (fitted(board, USER, 16), fitted(board, THREAD, 16));
     let widths: Vec<Constraint> = shown(
         threads,
         vec![
             Constraint::Length(first),
             // The longest state: `starting_error`.
             Constraint::Length(14),
-            Constraint::Length(u16::try_from(user).unwrap_or(16)),
+            Constraint::Length(user),
             Constraint::Length(10),
             Constraint::Length(2),
             Constraint::Length(4),
@@ -210,7 +200,7 @@ pub fn draw(frame: &mut Frame<'_>, board: &Board) {
             Constraint::Length(7),
             Constraint::Length(6),
             Constraint::Length(7),
-            Constraint::Length(u16::try_from(thread).unwrap_or(16)),
+            Constraint::Length(thread),
             Constraint::Fill(1),
         ],
     )
