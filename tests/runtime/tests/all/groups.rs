@@ -653,33 +653,37 @@ fn a_failed_member_is_substituted_by_a_compound_outside_the_group() {
     assert!(report.clean(), "{report:?}");
 }
 
+/// Compound `base`: stages `a -> b -> c` and `spare`, which substitutes `b` when it
+/// fails; its group is the caller's to add.
+fn spared(log: &Log, b: Step) -> coolbot::CompoundBuilder {
+    use coolbot::{CompoundBuilder, Policy};
+    use coolbot_runtime_tests::supervision::Coordinating;
+    CompoundBuilder::new("base", Coordinating)
+        .instance(stage::component("a", step("a", log)))
+        .instance(stage::component("b", b))
+        .instance(stage::component("c", step("c", log)))
+        .instance(stage::component("spare", step("spare", log)))
+        .connect("a.out", "b.feed")
+        .connect("b.out", "c.feed")
+        .substitute("spare", "b")
+        .on_error("b", Policy::Substitute)
+}
+
 /// A substitute that is a member of the group runs, standing in, where its original
 /// ran in the data flow (after what feeds it, before what it feeds), whatever its
 /// place in the group's list: it has no connections of its own when the group's
 /// order is made.
 #[test]
 fn a_substitute_in_the_group_runs_in_its_originals_place_in_the_flow() {
-    use coolbot::{CompoundBuilder, Policy};
-    use coolbot_runtime_tests::supervision::Coordinating;
     let log = Log::default();
     let (mut system, clock) = system();
-    let base = CompoundBuilder::new("base", Coordinating)
-        .instance(stage::component("a", step("a", &log)))
-        .instance(stage::component(
-            "b",
-            Step {
-                panic_at: Some(2),
-                ..step("b", &log)
-            },
-        ))
-        .instance(stage::component("c", step("c", &log)))
-        .instance(stage::component("spare", step("spare", &log)))
-        .connect("a.out", "b.feed")
-        .connect("b.out", "c.feed")
+    let b = Step {
+        panic_at: Some(2),
+        ..step("b", &log)
+    };
+    let base = spared(&log, b)
         // The spare first in the list: the order comes from the data flow.
         .thread("control", &["spare", "c", "b", "a"])
-        .substitute("spare", "b")
-        .on_error("b", Policy::Substitute)
         .build()
         .expect("base");
     system.add(base).expect("base");
@@ -737,26 +741,15 @@ fn a_substitutes_connections_never_make_its_group_refuse_to_start() {
 /// the queue retries it again.
 #[test]
 fn a_member_that_fails_again_on_probation_is_a_step() {
-    use coolbot::{CompoundBuilder, MonitorEvent, Policy, Step as Done, Supervision};
-    use coolbot_runtime_tests::supervision::Coordinating;
+    use coolbot::{MonitorEvent, Step as Done, Supervision};
     let log = Log::default();
     let (mut system, clock) = system();
-    let base = CompoundBuilder::new("base", Coordinating)
-        .instance(stage::component("a", step("a", &log)))
-        .instance(stage::component(
-            "b",
-            Step {
-                panic_from: Some(2),
-                ..step("b", &log)
-            },
-        ))
-        .instance(stage::component("c", step("c", &log)))
-        .instance(stage::component("spare", step("spare", &log)))
-        .connect("a.out", "b.feed")
-        .connect("b.out", "c.feed")
+    let b = Step {
+        panic_from: Some(2),
+        ..step("b", &log)
+    };
+    let base = spared(&log, b)
         .thread("control", &["a", "b", "c"])
-        .substitute("spare", "b")
-        .on_error("b", Policy::Substitute)
         .recovery(PERIOD * 3, Duration::from_secs(10))
         .build()
         .expect("base");
