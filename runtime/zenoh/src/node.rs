@@ -301,33 +301,6 @@ impl Node {
                 publisher,
             });
             let snapshots = handle.clone();
-            let own_key = monitor_key.clone();
-            let replier = self.replier();
-            queryables.push(
-                self.session
-                    .declare_queryable(monitor_key)
-                    .callback(move |query| {
-                        // Answered under the component's own key, not the query's
-                        // (`coolbot/robot/*/m`): the key tells which component it is.
-                        // From the node's replier: a querier that does not read its
-                        // answer holds that thread, not Zenoh's.
-                        let (snapshots, own_key) = (snapshots.clone(), own_key.clone());
-                        replier.send("a snapshot", move || {
-                            let reply = match serde_json::to_vec(&snapshots.snapshot()) {
-                                Ok(json) => query.reply(own_key.clone(), json).wait(),
-                                Err(error) => query.reply_err(error.to_string()).wait(),
-                            };
-                            if let Err(error) = reply {
-                                coolbot::limited!(&own_key, |held| tracing::warn!(
-                                    "snapshot not sent: {}{held}",
-                                    Chain(&*error)
-                                ));
-                            }
-                        });
-                    })
-                    .wait()
-                    .map_err(Error::zenoh("declare a monitoring queryable"))?,
-            );
             let info_handle = handle.clone();
             let echoed = Arc::clone(&self.echoed);
             let info_path = path.clone();
@@ -388,6 +361,36 @@ impl Node {
                     })
                     .wait()
                     .map_err(Error::zenoh("declare a control queryable"))?,
+            );
+            // The snapshot's queryable last: a querier whose snapshot is answered has
+            // had the control and info queryables' declarations first (one link,
+            // in order), so its next command finds its way (`crate::place`).
+            let own_key = monitor_key.clone();
+            let replier = self.replier();
+            queryables.push(
+                self.session
+                    .declare_queryable(monitor_key)
+                    .callback(move |query| {
+                        // Answered under the component's own key, not the query's
+                        // (`coolbot/robot/*/m`): the key tells which component it is.
+                        // From the node's replier: a querier that does not read its
+                        // answer holds that thread, not Zenoh's.
+                        let (snapshots, own_key) = (snapshots.clone(), own_key.clone());
+                        replier.send("a snapshot", move || {
+                            let reply = match serde_json::to_vec(&snapshots.snapshot()) {
+                                Ok(json) => query.reply(own_key.clone(), json).wait(),
+                                Err(error) => query.reply_err(error.to_string()).wait(),
+                            };
+                            if let Err(error) = reply {
+                                coolbot::limited!(&own_key, |held| tracing::warn!(
+                                    "snapshot not sent: {}{held}",
+                                    Chain(&*error)
+                                ));
+                            }
+                        });
+                    })
+                    .wait()
+                    .map_err(Error::zenoh("declare a monitoring queryable"))?,
             );
         }
         let (stop, stopped) = crossbeam_channel::bounded::<()>(0);

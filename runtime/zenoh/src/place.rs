@@ -52,6 +52,10 @@ pub const DEFAULT_SILENCE: Duration = Duration::from_secs(3);
 /// proxy's reason, which names the node, rather than the compound's timeout.
 pub const FIRST_START: Duration = Duration::from_secs(4);
 
+/// How soon a proxy asks again for the first snapshot of an instance just built
+/// when nothing here knew where to send the question yet.
+const REASK: Duration = Duration::from_millis(10);
+
 /// The nodes this process's proxies watch that are lost now, by the placing session
 /// and the node's name: since when, and how many instantiations were refused
 /// meanwhile. A node's loss and its return are logged once each, however many proxies
@@ -178,13 +182,14 @@ pub enum PlaceError {
         source: Box<Error>,
     },
     /// The instance's node did not answer a command or a snapshot query in time.
-    #[error("node `{node}` did not answer for `{instance}` within {waited:?}")]
+    #[error("node `{node}` did not answer for `{instance}` (waited {waited:.1?})")]
     NoAnswer {
         /// The node.
         node: String,
         /// The instance there.
         instance: String,
-        /// How long it waited.
+        /// How long it waited: the timeout, or less where nothing here knew where to
+        /// send the question (the node gone, or its instance not known here yet).
         waited: Duration,
     },
     /// The remote instance rejected a command (its reason).
@@ -648,6 +653,7 @@ impl End {
             decoding: false,
             source,
         })?;
+        let asked = Instant::now();
         let replies = self
             .node
             .session()
@@ -656,7 +662,7 @@ impl End {
             .timeout(self.timeout)
             .wait()
             .map_err(Error::zenoh("send a command"))?;
-        let sample = self.answer(replies.recv().ok())?;
+        let sample = self.answer(replies.recv().ok(), asked)?;
         self.within(
             sample.payload(),
             crate::limits::REPLY,
@@ -669,15 +675,17 @@ impl End {
         }
     }
 
-    /// The sample of the instance's node's answer (`None`: none came in time).
+    /// The sample of the instance's node's answer to a question `asked` then (`None`:
+    /// none came in time, or nothing here knew where to send the question).
     fn answer(
         &self,
         reply: Option<zenoh::query::Reply>,
+        asked: Instant,
     ) -> Result<zenoh::sample::Sample, PlaceError> {
         let reply = reply.ok_or_else(|| PlaceError::NoAnswer {
             node: self.on.clone(),
             instance: self.name.clone(),
-            waited: self.timeout,
+            waited: asked.elapsed(),
         })?;
         reply.into_result().map_err(|error| {
             Error::ErrorReply {
@@ -818,6 +826,30 @@ impl End {
 
     /// The remote instance's snapshot, asked for now.
     fn snapshot(&self) -> Result<Monitor, PlaceError> {
+        self.snapshot_since(Instant::now())
+    }
+
+    /// The snapshot of a generation its node has just built. The node declared the
+    /// snapshot's queryable before it answered the request, but this node may learn
+    /// of the declaration after the answer (Zenoh orders neither against the other):
+    /// a question nothing here routes yet ends at once, unanswered. So it is asked
+    /// again every [`REASK`] until it is answered or the proxy's timeout has passed
+    /// since the first question.
+    fn first_snapshot(&self) -> Result<Monitor, PlaceError> {
+        let first = Instant::now();
+        loop {
+            match self.snapshot_since(first) {
+                Err(PlaceError::NoAnswer { .. }) if first.elapsed() + REASK < self.timeout => {
+                    std::thread::sleep(REASK);
+                }
+                answer => return answer,
+            }
+        }
+    }
+
+    /// The remote instance's snapshot, asked for now; a failure tells the time since
+    /// `asked`.
+    fn snapshot_since(&self, asked: Instant) -> Result<Monitor, PlaceError> {
         let replies = self
             .node
             .session()
@@ -825,7 +857,7 @@ impl End {
             .timeout(self.timeout)
             .wait()
             .map_err(Error::zenoh("ask for the remote snapshot"))?;
-        let sample = self.answer(replies.recv().ok())?;
+        let sample = self.answer(replies.recv().ok(), asked)?;
         self.within(sample.payload(), crate::limits::SNAPSHOT, "the snapshot")?;
         serde_json::from_slice(&sample.payload().to_bytes())
             .map_err(|source| self.undecodable(source))
@@ -1190,7 +1222,7 @@ impl End {
         self.instantiated = true;
         self.gone = None;
         *lock(&self.shared.lost) = None;
-        let snapshot = self.snapshot()?;
+        let snapshot = self.first_snapshot()?;
         self.built = true;
         self.maybe_built = false;
         self.shared.heard();

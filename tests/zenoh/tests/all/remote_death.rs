@@ -4,8 +4,8 @@
 //! policy acts (here: its local substitute takes over) and the recovery queue builds a
 //! new generation of the instance on its node once one can be built.
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use coolbot::{Command, Controllable, Handle, Monitor, SectionResult, State, Step, System};
@@ -168,15 +168,22 @@ struct Mute {
     _queryables: Vec<zenoh::query::Queryable<()>>,
 }
 
-fn mute_station(node: &Node) -> Mute {
-    let accept = |query: zenoh::query::Query| {
-        let json = serde_json::to_vec(&ControlReply::Accepted).unwrap();
-        let _ = query.reply(query.key_expr().clone(), json).wait();
-    };
+/// Answer `query` with `Accepted`, as an agent and a control port do.
+fn accept(query: &zenoh::query::Query) {
+    let json = serde_json::to_vec(&ControlReply::Accepted).unwrap();
+    let _ = query.reply(query.key_expr().clone(), json).wait();
+}
+
+/// A running `Flaky`'s snapshot, as its monitoring port answers it.
+fn running_snapshot() -> Vec<u8> {
     let mut harness =
         coolbot::harness::Harness::running(flaky::component("mute", Counting)).unwrap();
     harness.advance(Duration::from_millis(20)).unwrap();
-    let snapshot = serde_json::to_vec(&harness.monitor()).unwrap();
+    serde_json::to_vec(&harness.monitor()).unwrap()
+}
+
+fn mute_station(node: &Node) -> Mute {
+    let snapshot = running_snapshot();
     let answering = Arc::new(AtomicBool::new(true));
     let answered = Arc::new(AtomicU64::new(0));
     let (answers, count) = (Arc::clone(&answering), Arc::clone(&answered));
@@ -184,12 +191,12 @@ fn mute_station(node: &Node) -> Mute {
     let queryables = vec![
         session
             .declare_queryable(coolbot_zenoh::keys::agent("dying-station", "*", "*"))
-            .callback(accept)
+            .callback(|query| accept(&query))
             .wait()
             .unwrap(),
         session
             .declare_queryable("coolbot/dying-station/*/c")
-            .callback(accept)
+            .callback(|query| accept(&query))
             .wait()
             .unwrap(),
         session
@@ -210,6 +217,70 @@ fn mute_station(node: &Node) -> Mute {
         answered,
         _queryables: queryables,
     }
+}
+
+/// A station whose instance's ports are declared `late` after its agent answered
+/// (its agent accepts every request, then declares the control and monitoring
+/// queryables of what it was asked to build): the order in which a robot may learn
+/// of them, since Zenoh orders a declaration and a later answer on one link no more
+/// than that. The queryables live as long as what this returns.
+fn late_station(node: &Node, late: Duration) -> Arc<Mutex<Vec<zenoh::query::Queryable<()>>>> {
+    let declared = Arc::new(Mutex::new(Vec::new()));
+    let keep = Arc::clone(&declared);
+    let session = node.session().clone();
+    let agent = node
+        .session()
+        .declare_queryable(coolbot_zenoh::keys::agent("dying-station", "*", "*"))
+        .callback(move |query| {
+            accept(&query);
+            let (session, keep) = (session.clone(), Arc::clone(&keep));
+            std::thread::spawn(move || {
+                std::thread::sleep(late);
+                let snapshot = running_snapshot();
+                let control = session
+                    .declare_queryable("coolbot/dying-station/*/c")
+                    .callback(|query| accept(&query))
+                    .wait()
+                    .unwrap();
+                let monitor = session
+                    .declare_queryable("coolbot/dying-station/*/m")
+                    .callback(move |query| {
+                        let _ = query
+                            .reply(query.key_expr().clone(), snapshot.clone())
+                            .wait();
+                    })
+                    .wait()
+                    .unwrap();
+                keep.lock().unwrap().extend([control, monitor]);
+            });
+        })
+        .wait()
+        .unwrap();
+    declared.lock().unwrap().push(agent);
+    declared
+}
+
+/// An instance whose node answered its request before this node knew its ports is
+/// started once they are known: its first snapshot is asked again while nothing here
+/// can route the question, not taken for a node that does not answer.
+#[test]
+fn an_instance_whose_ports_are_known_after_its_agent_answered_starts() {
+    let (station, robot) = pair("dying-station", "dying-robot");
+    let robot = Arc::new(robot);
+    let _late = late_station(&station, Duration::from_millis(300));
+    let _placer = Placer::new(Arc::clone(&robot), registry()).install();
+    let mut system = System::new();
+    let cell = system
+        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
+        .unwrap();
+    system.run_all().unwrap();
+    let proxy = cell.instance("flaky").expect("the proxy");
+    proxy
+        .wait_for(|m| m.state == State::Running, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the proxy runs: {timeout}"));
+    assert_eq!(steps(&cell), Vec::new(), "no fault on the way");
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
 }
 
 #[test]
