@@ -98,6 +98,15 @@ impl Compound {
                 .handle
                 .wait_for(|m| m.state != State::Starting, INSTANCE_START_TIMEOUT)
                 .map_err(RunError::from)?;
+            if monitor.state == State::StartingError && instance.handles_start_failure() {
+                // A fault its policy handles once the compound runs, as it would
+                // one that came later (its substitute stands in and it goes into the
+                // recovery queue, or it is ignored, or its group leads on without
+                // it): a robot starts though a driver's node is not up yet.
+                instance.handled = false;
+                self.deferred_faults = true;
+                continue;
+            }
             if monitor.state == State::StartingError {
                 return Err(RunError::CouldNotStart {
                     instance: instance.name.clone(),

@@ -72,6 +72,20 @@ pub(super) struct Instance {
     pub(super) retry: Option<Posted>,
 }
 
+impl Instance {
+    /// Whether its policy handles its failing to start (at the compound's start)
+    /// without failing the compound, as it handles a later fault: `substitute` (its
+    /// substitute stands in), `ignore`, or a member of a redundant group. Under
+    /// `propagate`, or `restart` (nothing restarts from `starting_error`), and for a
+    /// substitute, the compound cannot start.
+    pub(super) fn handles_start_failure(&self) -> bool {
+        self.substitutes.is_none()
+            && (self.group.is_some()
+                || self.policy == Policy::Ignore
+                || (self.policy == Policy::Substitute && self.substitute.is_some()))
+    }
+}
+
 /// A variable of the compound mapped onto an instance's.
 pub(super) struct Mapped {
     pub(super) instance: usize,

@@ -11,24 +11,32 @@ use coolbot::crossbeam_channel::{self, Sender};
 use coolbot::port::LastIn;
 use coolbot::{Component, CompoundError, State, Step};
 use coolbot_runtime_tests::generated::{
-    clock_recovering, clock_restarting, clock_trip_puller, clock_trippable,
+    clock_ignoring, clock_recovering, clock_redundant, clock_restarting, clock_trip_puller,
+    clock_trippable,
 };
 use coolbot_runtime_tests::support::WAIT;
 use coolbot_runtime_tests::support::compound::{CompoundRig, count};
 
 /// A `ClockTrippable`'s behaviour: its answer to a pull of `trip` fails while `fails`
 /// is set; its `start` hook takes `slow_start` of real time (a driver opening a
-/// device).
-struct Trippable(Arc<AtomicBool>, Duration);
+/// device), and fails while `start_fails` is set (the device is not there).
+struct Trippable {
+    fails: Arc<AtomicBool>,
+    slow_start: Duration,
+    start_fails: Arc<AtomicBool>,
+}
 
 impl clock_trippable::Behavior for Trippable {
     fn start(&mut self, _cx: &mut clock_trippable::Cx<'_>) -> coolbot::SectionResult {
-        std::thread::sleep(self.1);
+        std::thread::sleep(self.slow_start);
+        if self.start_fails.load(Ordering::SeqCst) {
+            return Err(coolbot::Fault::message("no device"));
+        }
         Ok(())
     }
 
     fn answer_trip(&mut self, _cx: &mut clock_trippable::Cx<'_>) -> Result<u64, coolbot::Fault> {
-        if self.0.load(Ordering::SeqCst) {
+        if self.fails.load(Ordering::SeqCst) {
             return Err(coolbot::Fault::message("tripped"));
         }
         Ok(1)
@@ -50,13 +58,16 @@ struct NoSections;
 
 impl clock_restarting::Supervisor for NoSections {}
 impl clock_recovering::Supervisor for NoSections {}
+impl clock_ignoring::Supervisor for NoSections {}
+impl clock_redundant::Supervisor for NoSections {}
 
 /// The parts of either compound: `w` fails while `fails`, `s` while `s_fails`; `w`'s
-/// `start` takes `slow_start` of real time.
+/// `start` takes `slow_start` of real time, and fails while `w_start_fails`.
 struct Parts {
     fails: Arc<AtomicBool>,
     s_fails: Arc<AtomicBool>,
     slow_start: Duration,
+    w_start_fails: Arc<AtomicBool>,
 }
 
 impl Parts {
@@ -65,6 +76,25 @@ impl Parts {
             fails: Arc::clone(fails),
             s_fails: Arc::clone(s_fails),
             slow_start: Duration::ZERO,
+            w_start_fails: Arc::new(AtomicBool::new(false)),
+        }
+    }
+
+    /// `s`'s behaviour.
+    fn s(&self) -> Trippable {
+        Trippable {
+            fails: Arc::clone(&self.s_fails),
+            slow_start: Duration::ZERO,
+            start_fails: Arc::new(AtomicBool::new(false)),
+        }
+    }
+
+    /// `w`'s behaviour.
+    fn w(&self) -> Trippable {
+        Trippable {
+            fails: Arc::clone(&self.fails),
+            slow_start: self.slow_start,
+            start_fails: Arc::clone(&self.w_start_fails),
         }
     }
 }
@@ -74,7 +104,7 @@ impl clock_restarting::Parts for Parts {
         NoSections
     }
     fn w(&mut self) -> impl clock_trippable::Behavior {
-        Trippable(Arc::clone(&self.fails), self.slow_start)
+        Parts::w(self)
     }
 }
 
@@ -83,12 +113,31 @@ impl clock_recovering::Parts for Parts {
         NoSections
     }
     fn w(&mut self) -> impl clock_trippable::Behavior {
-        Trippable(Arc::clone(&self.fails), self.slow_start)
+        Parts::w(self)
     }
     fn s(&mut self) -> impl clock_trippable::Behavior {
-        Trippable(Arc::clone(&self.s_fails), Duration::ZERO)
+        Parts::s(self)
     }
 }
+
+/// `ClockIgnoring` and `ClockRedundant`: `w` and `s` as in `ClockRecovering`.
+macro_rules! w_and_s {
+    ($($m:ident),*) => {$(
+        impl $m::Parts for Parts {
+            fn supervisor(&mut self) -> impl $m::Supervisor {
+                NoSections
+            }
+            fn w(&mut self) -> impl clock_trippable::Behavior {
+                Parts::w(self)
+            }
+            fn s(&mut self) -> impl clock_trippable::Behavior {
+                Parts::s(self)
+            }
+        }
+    )*};
+}
+
+w_and_s!(clock_ignoring, clock_redundant);
 
 /// A system on a virtual clock with compound `k` (exporting its instance `w`'s
 /// `trip`) and a `ClockTripPuller` `o`, which pulls `k.trip`.
@@ -200,4 +249,112 @@ fn recovery_retries_run_on_the_virtual_clock() {
 #[test]
 fn a_recovery_retry_whose_restart_takes_real_time_is_answered_at_the_clocks_time() {
     recovery_retries(Duration::from_millis(50));
+}
+
+/// `w` cannot start when the compound starts (its device, or its node, is not there
+/// yet): under `substitute` that is a fault like a later one. `s` stands in from the
+/// start, the compound runs, and the queue retries `w` every 100 ms of clock time
+/// until it starts; then it takes its place back.
+#[test]
+fn an_instance_that_cannot_start_is_substituted_from_the_start_and_recovered() {
+    let never = Arc::new(AtomicBool::new(false));
+    let parts = Parts::new(&never, &never);
+    let start_fails = Arc::clone(&parts.w_start_fails);
+    start_fails.store(true, Ordering::SeqCst);
+    let rig = rig(clock_recovering::component("k", parts));
+    rig.rig.wait_steps(
+        "w",
+        1,
+        |step| matches!(step, Step::Substituted { by } if by == "s"),
+    );
+    let failed = rig.rig.compound.snapshot().supervision;
+    assert!(
+        failed
+            .iter()
+            .any(|s| s.instance == "w" && s.step == Step::Failed && s.detail.contains("no device")),
+        "the step says why: {failed:?}"
+    );
+    rig.rig.wait_instance_state("s", State::Running);
+    assert_eq!(rig.rig.compound.state(), State::Running);
+    assert_eq!(rig.rig.instance("w").state(), State::StartingError);
+
+    rig.advance(100);
+    assert_eq!(rig.steps("w", &Step::RetryFailed), 1, "still no device");
+    start_fails.store(false, Ordering::SeqCst);
+    rig.advance(100);
+    assert_eq!(rig.steps("w", &Step::Retried), 1, "it starts at 200 ms");
+    rig.advance(100);
+    assert_eq!(rig.steps("w", &Step::Recovered), 1, "recovered at 300 ms");
+    rig.rig.wait_instance_state("w", State::Running);
+    rig.rig.wait_instance_state("s", State::Ready);
+    assert!(rig.rig.shutdown().clean());
+}
+
+/// Under a policy that does not handle it (`restart`: nothing restarts from
+/// `starting_error`), an instance that cannot start leaves the compound unable to
+/// start, and the error names the instance and its reason.
+#[test]
+fn an_instance_that_cannot_start_under_restart_fails_the_compounds_start() {
+    let never = Arc::new(AtomicBool::new(false));
+    let parts = Parts::new(&never, &never);
+    parts.w_start_fails.store(true, Ordering::SeqCst);
+    let mut rig = CompoundRig::on_virtual_clock(clock_restarting::component("k", parts));
+    let _ = rig.system.run_all();
+    let failed = rig
+        .compound
+        .wait_for(|m| m.state != State::Starting, WAIT)
+        .expect("the compound's start ends");
+    assert_eq!(failed.state, State::StartingError);
+    let error = failed.error.unwrap_or_default();
+    assert!(
+        error.contains("instance `w` could not start") && error.contains("no device"),
+        "{error}"
+    );
+    let _ = rig.system.shutdown();
+}
+
+/// `Parts` whose `w` cannot start until the flag returned is cleared.
+fn w_cannot_start() -> (Parts, Arc<AtomicBool>) {
+    let never = Arc::new(AtomicBool::new(false));
+    let parts = Parts::new(&never, &never);
+    parts.w_start_fails.store(true, Ordering::SeqCst);
+    let start_fails = Arc::clone(&parts.w_start_fails);
+    (parts, start_fails)
+}
+
+/// Under `ignore`, an instance that cannot start stays in `starting_error` and the
+/// compound runs on without it.
+#[test]
+fn an_instance_that_cannot_start_under_ignore_is_left_and_the_compound_runs() {
+    let (parts, _start_fails) = w_cannot_start();
+    let mut rig = CompoundRig::on_virtual_clock(clock_ignoring::component("k", parts));
+    rig.run();
+    rig.wait_steps("w", 1, |step| *step == Step::Ignored);
+    rig.wait_instance_state("s", State::Running);
+    assert_eq!(rig.compound.state(), State::Running);
+    assert_eq!(rig.instance("w").state(), State::StartingError);
+    assert!(rig.shutdown().clean());
+}
+
+/// A redundant member that cannot start leaves its group to the members that
+/// started: `s` leads from the start, and `w` joins when a retry starts it.
+#[test]
+fn a_redundant_member_that_cannot_start_leaves_the_group_to_the_others() {
+    let (parts, start_fails) = w_cannot_start();
+    let mut rig = CompoundRig::on_virtual_clock(clock_redundant::component("k", parts));
+    rig.run();
+    rig.wait_steps(
+        "w",
+        1,
+        |step| matches!(step, Step::Substituted { by } if by == "s"),
+    );
+    rig.wait_instance_state("s", State::Running);
+    assert_eq!(rig.compound.state(), State::Running);
+    start_fails.store(false, Ordering::SeqCst);
+    rig.advance(Duration::from_millis(100));
+    assert_eq!(rig.steps("w", &Step::Retried), 1, "it starts at 100 ms");
+    rig.advance(Duration::from_millis(100));
+    assert_eq!(rig.steps("w", &Step::Recovered), 1, "recovered at 200 ms");
+    rig.wait_instance_state("w", State::Running);
+    assert!(rig.shutdown().clean());
 }

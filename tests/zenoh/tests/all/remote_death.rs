@@ -521,3 +521,37 @@ fn a_forged_token_does_not_hide_a_station_killed_without_a_word() {
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
+
+/// A robot started before its station's agent serves: the remote instance cannot
+/// start (no agent answers within the placer's timeout), a fault the instance's
+/// policy handles as it would a later one. The spare stands in from the start, the
+/// compound runs, and the recovery queue builds the instance on the station once an
+/// agent is there.
+#[test]
+fn a_remote_instance_whose_node_does_not_serve_at_start_is_substituted_then_built() {
+    let (station, robot) = pair("dying-station", "dying-robot");
+    let (station, robot) = (Arc::new(station), Arc::new(robot));
+    let _placer = Placer::new(Arc::clone(&robot), registry())
+        .timeout(Duration::from_secs(1))
+        .install();
+    let mut system = System::new();
+    let cell = system
+        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
+        .unwrap();
+    system.run_all().unwrap();
+    let detail = wait_step(&cell, |s| *s == Step::Failed, "the proxy cannot start");
+    assert!(detail.contains("dying-station"), "{detail}");
+    wait_step(
+        &cell,
+        |s| matches!(s, Step::Substituted { .. }),
+        "the spare stands in from the start",
+    );
+    cell.wait_for(|m| m.state == State::Running, PATIENCE)
+        .unwrap_or_else(|timeout| panic!("the compound runs: {timeout}"));
+
+    let _agent = Agent::start(Arc::clone(&station), registry()).expect("agent");
+    let ctl = Ctl::new(station.session().clone(), PATIENCE);
+    substituted_then_recovered(&cell, &ctl, "");
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
