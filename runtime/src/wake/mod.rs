@@ -542,16 +542,13 @@ mod tests {
         RemoteBell::open(&address).unwrap().ring();
     }
 
-    /// A thread asleep on its bell is woken by a ring from another process, and only
-    /// by a ring: the bell is `RUNG` when it returns.
+    /// Whether `bell` was rung when a thread asleep on it woke: the thread parks on
+    /// it, and once it sleeps `ring` is called.
     #[cfg(target_os = "linux")]
-    #[test]
-    fn another_process_wakes_a_thread_asleep_on_its_bell() {
-        let bell = Doorbell::new();
-        let address = bell.address().expect("the bell is in shared memory");
+    fn thread_woken_by(bell: &Arc<Doorbell>, ring: impl FnOnce()) -> bool {
         let (woke, woken) = std::sync::mpsc::channel();
         let sleeper = {
-            let bell = Arc::clone(&bell);
+            let bell = Arc::clone(bell);
             std::thread::spawn(move || {
                 bell.attach();
                 bell.park_until(None);
@@ -562,26 +559,25 @@ mod tests {
         while bell.state().load(Ordering::SeqCst) != SLEEPING {
             std::thread::yield_now();
         }
-        ring_from_another_process(address);
+        ring();
         let rung = woken
             .recv_timeout(std::time::Duration::from_secs(60))
-            .expect("woken by the other process");
-        assert!(rung);
+            .expect("woken by the ring");
         sleeper.join().unwrap();
+        rung
     }
 
-    /// The same for a member of an execution group: the ringer wakes the group's
-    /// thread, asleep on the group's word.
+    /// Which of `first` and `second` were rung when a group's thread asleep on both
+    /// (through `word`) woke: once it sleeps `ring` is called.
     #[cfg(target_os = "linux")]
-    #[test]
-    fn another_process_wakes_a_group_asleep_on_a_members_bell() {
-        let (first, second) = (Doorbell::new(), Doorbell::new());
-        let word = GroupWord::new();
-        let address = second.address().expect("the bell is in shared memory");
+    fn group_woken_by(
+        (first, second): (&Arc<Doorbell>, &Arc<Doorbell>),
+        word: &Arc<GroupWord>,
+        ring: impl FnOnce(),
+    ) -> (bool, bool) {
         let (woke, woken) = std::sync::mpsc::channel();
         let group = {
-            let (first, second, word) =
-                (Arc::clone(&first), Arc::clone(&second), Arc::clone(&word));
+            let (first, second, word) = (Arc::clone(first), Arc::clone(second), Arc::clone(word));
             std::thread::spawn(move || {
                 first.attach_to_group(&word);
                 second.attach_to_group(&word);
@@ -594,12 +590,37 @@ mod tests {
         {
             std::thread::yield_now();
         }
-        ring_from_another_process(address);
+        ring();
         let rung = woken
             .recv_timeout(std::time::Duration::from_secs(60))
-            .expect("woken by the other process");
-        assert_eq!(rung, (false, true));
+            .expect("woken by the ring");
         group.join().unwrap();
+        rung
+    }
+
+    /// A thread asleep on its bell is woken by a ring from another process, and only
+    /// by a ring: the bell is `RUNG` when it returns.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn another_process_wakes_a_thread_asleep_on_its_bell() {
+        let bell = Doorbell::new();
+        let address = bell.address().expect("the bell is in shared memory");
+        assert!(thread_woken_by(&bell, || ring_from_another_process(
+            address
+        )));
+    }
+
+    /// The same for a member of an execution group: the ringer wakes the group's
+    /// thread, asleep on the group's word.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn another_process_wakes_a_group_asleep_on_a_members_bell() {
+        let (first, second) = (Doorbell::new(), Doorbell::new());
+        let address = second.address().expect("the bell is in shared memory");
+        let rung = group_woken_by((&first, &second), &GroupWord::new(), || {
+            ring_from_another_process(address);
+        });
+        assert_eq!(rung, (false, true));
     }
 
     /// The environment variable that makes [`on_the_heap`] run (in a process of its
@@ -639,8 +660,6 @@ mod tests {
     #[test]
     #[ignore = "run by bells_on_the_heap_wake_a_thread_and_a_group, in a process of its own"]
     fn on_the_heap() {
-        use std::sync::mpsc;
-        use std::time::Duration;
         assert!(std::env::var_os(HEAP).is_some(), "run by its test");
         // Every pair of the mapping taken: the next bells are on the heap.
         let mut mapped = Vec::new();
@@ -657,48 +676,15 @@ mod tests {
         if has_mapping {
             assert_eq!(mapped.len(), (words::PAIRS_IN_A_MAPPING - 1) as usize);
         }
-        let limit = Duration::from_secs(60);
-
         // A thread asleep on a bell on the heap is woken by a ring.
-        let (woke, woken) = mpsc::channel();
-        let sleeper = {
-            let bell = Arc::clone(&heap);
-            std::thread::spawn(move || {
-                bell.attach();
-                bell.park_until(None);
-                woke.send(bell.is_rung()).unwrap();
-            })
-        };
-        while heap.state().load(Ordering::SeqCst) != SLEEPING {
-            std::thread::yield_now();
-        }
-        heap.ring();
-        assert_eq!(woken.recv_timeout(limit), Ok(true), "woken by the ring");
-        sleeper.join().unwrap();
+        assert!(thread_woken_by(&heap, || heap.ring()), "woken by the ring");
 
         // A group on the heap (its word and its members' bells): a ring of the second
         // member wakes the thread, asleep on the group's word.
         let (first, second, word) = (Doorbell::new(), Doorbell::new(), GroupWord::new());
         assert!(first.address().is_none() && second.address().is_none());
-        let (woke, woken) = mpsc::channel();
-        let group = {
-            let (first, second, word) =
-                (Arc::clone(&first), Arc::clone(&second), Arc::clone(&word));
-            std::thread::spawn(move || {
-                first.attach_to_group(&word);
-                second.attach_to_group(&word);
-                Doorbell::park_any(&[&first, &second], &word, None);
-                woke.send((first.is_rung(), second.is_rung())).unwrap();
-            })
-        };
-        while word.0.state().load(Ordering::SeqCst) != SLEEPING
-            || second.state().load(Ordering::SeqCst) != SLEEPING
-        {
-            std::thread::yield_now();
-        }
-        second.ring();
-        assert_eq!(woken.recv_timeout(limit), Ok((false, true)));
-        group.join().unwrap();
+        let rung = group_woken_by((&first, &second), &word, || second.ring());
+        assert_eq!(rung, (false, true));
 
         if !has_mapping {
             return;
