@@ -50,6 +50,7 @@ impl Compound {
     /// Start the instances (first start) or bring them back to `ready` (a restart),
     /// and restore the declared arrangement.
     pub(super) fn start_instances(&mut self, cx: &mut Context) -> Result<(), Fault> {
+        let restart = self.started;
         if !self.started {
             if let Some(waker) = cx.waker() {
                 self.events = self
@@ -78,6 +79,11 @@ impl Compound {
         for index in 0..self.instances.len() {
             let instance = &mut self.instances[index];
             instance.pending = None;
+            // A retry of the recovery queue not taken yet is not taken at all: its
+            // answer would be taken for the next retry's.
+            if let Some(retry) = instance.retry.take() {
+                retry.withdraw();
+            }
             instance.restarts.clear();
             instance.handled = false;
             if instance.status == Status::Destroyed {
@@ -94,10 +100,16 @@ impl Compound {
             } else {
                 Status::Active
             };
-            let monitor = instance
+            let mut monitor = instance
                 .handle
                 .wait_for(|m| m.state != State::Starting, INSTANCE_START_TIMEOUT)
                 .map_err(RunError::from)?;
+            if restart && monitor.state == State::StartingError {
+                // A restart starts again what could not start before (what fails
+                // again is judged below). Its answer does not matter: its state does.
+                let _ = command(&instance.handle, Controllable::Ready);
+                monitor = instance.handle.snapshot();
+            }
             if monitor.state == State::StartingError && instance.handles_start_failure() {
                 // A fault its policy handles once the compound runs, as it would
                 // one that came later (its substitute stands in and it goes into the
@@ -124,6 +136,20 @@ impl Compound {
                     }
                     .into());
                 }
+            }
+        }
+        // A redundant group none of whose members started has nothing to run on.
+        for group in &self.groups {
+            if group
+                .iter()
+                .all(|m| self.instances[*m].handle.state() == State::StartingError)
+            {
+                let first = &self.instances[group[0]];
+                return Err(RunError::CouldNotStart {
+                    instance: first.name.clone(),
+                    error: first.handle.snapshot().error.unwrap_or_default(),
+                }
+                .into());
             }
         }
         // Every redundant group is led by its first member again; its merged streams

@@ -38,7 +38,7 @@ impl Compound {
         if let Some(group) = instance.group {
             return self.groups[group]
                 .iter()
-                .any(|m| self.instances[*m].status == Status::Active);
+                .any(|m| self.instances[*m].status == Status::Active && !self.failing(*m));
         }
         instance
             .substitute

@@ -24,9 +24,21 @@ impl Compound {
         })
     }
 
-    /// Whether member `index` may take its group's lead: active, and in step.
+    /// Whether member `index` may take its group's lead: active, not failed (its
+    /// policy not run yet: it may have failed to start), and in step.
     pub(super) fn can_lead(&self, index: usize) -> bool {
-        self.instances[index].status == Status::Active && self.lost_since_join(index) == 0
+        self.instances[index].status == Status::Active
+            && !self.failing(index)
+            && self.lost_since_join(index) == 0
+    }
+
+    /// Whether instance `index` is in `running_error` or `starting_error` as the
+    /// compound last saw it.
+    pub(super) fn failing(&self, index: usize) -> bool {
+        matches!(
+            self.view.instances[index].state,
+            crate::table::State::RunningError | crate::table::State::StartingError
+        )
     }
 
     /// Member `index` joins its group (at the compound's start, or recovered): its

@@ -56,6 +56,11 @@ pub const FIRST_START: Duration = Duration::from_secs(4);
 /// when nothing here knew where to send the question yet.
 const REASK: Duration = Duration::from_millis(10);
 
+/// How long a proxy's first start waits for its instance's first snapshot at least,
+/// however long the instantiation took of [`FIRST_START`]. With it the start stays
+/// within the compound's wait ([`coolbot::compound::INSTANCE_START_TIMEOUT`]).
+const FIRST_SNAPSHOT: Duration = Duration::from_millis(500);
+
 /// The nodes this process's proxies watch that are lost now, by the placing session
 /// and the node's name: since when, and how many instantiations were refused
 /// meanwhile. A node's loss and its return are logged once each, however many proxies
@@ -418,7 +423,7 @@ impl Placer {
             subscribers: Vec::new(),
             acks: Vec::new(),
             shared,
-            instantiated: false,
+            asked_before: false,
             built: false,
             maybe_built: false,
             silence: self.silence,
@@ -510,8 +515,8 @@ struct End {
     /// The outputs' acknowledgment queryables.
     acks: Vec<zenoh::query::Queryable<()>>,
     shared: Arc<Shared>,
-    /// Whether any generation was ever built.
-    instantiated: bool,
+    /// Whether a generation was ever asked for: only the first start is patient.
+    asked_before: bool,
     /// Whether the current generation was built and seen (its snapshot came): a
     /// failed attempt leaves it unbuilt, and the next start tries a new one.
     built: bool,
@@ -826,20 +831,24 @@ impl End {
 
     /// The remote instance's snapshot, asked for now.
     fn snapshot(&self) -> Result<Monitor, PlaceError> {
-        self.snapshot_since(Instant::now())
+        self.ask_snapshot(Instant::now(), self.timeout)
     }
 
-    /// The snapshot of a generation its node has just built. The node declared the
-    /// snapshot's queryable before it answered the request, but this node may learn
-    /// of the declaration after the answer (Zenoh orders neither against the other):
-    /// a question nothing here routes yet ends at once, unanswered. So it is asked
-    /// again every [`REASK`] until it is answered or the proxy's timeout has passed
-    /// since the first question.
-    fn first_snapshot(&self) -> Result<Monitor, PlaceError> {
+    /// The snapshot of a generation its node has just built, by `deadline`. The node
+    /// declared the snapshot's queryable before it answered the request, but this
+    /// node may learn of the declaration after the answer (Zenoh orders neither
+    /// against the other): a question nothing here routes yet ends at once,
+    /// unanswered. So it is asked again every [`REASK`], each question waiting at most
+    /// until `deadline`, until one is answered, the deadline passes, or the node is
+    /// known lost.
+    fn first_snapshot(&self, deadline: Instant) -> Result<Monitor, PlaceError> {
         let first = Instant::now();
         loop {
-            match self.snapshot_since(first) {
-                Err(PlaceError::NoAnswer { .. }) if first.elapsed() + REASK < self.timeout => {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.ask_snapshot(first, left.max(REASK)) {
+                Err(PlaceError::NoAnswer { .. })
+                    if left > REASK && lock(&self.shared.lost).is_none() =>
+                {
                     std::thread::sleep(REASK);
                 }
                 answer => return answer,
@@ -847,14 +856,14 @@ impl End {
         }
     }
 
-    /// The remote instance's snapshot, asked for now; a failure tells the time since
-    /// `asked`.
-    fn snapshot_since(&self, asked: Instant) -> Result<Monitor, PlaceError> {
+    /// The remote instance's snapshot, asked for now and waited for at most `wait`;
+    /// a failure tells the time since `asked`.
+    fn ask_snapshot(&self, asked: Instant, wait: Duration) -> Result<Monitor, PlaceError> {
         let replies = self
             .node
             .session()
             .get(keys::monitor(&self.on, &self.name))
-            .timeout(self.timeout)
+            .timeout(wait)
             .wait()
             .map_err(Error::zenoh("ask for the remote snapshot"))?;
         let sample = self.answer(replies.recv().ok(), asked)?;
@@ -1165,10 +1174,11 @@ impl End {
         *lock(&self.shared.monitor_key) = keys::monitor(&self.on, &self.name);
         // The first time, the node may not be reachable yet (a robot and its station
         // started together): ask again every 100 ms while nothing answers, for the
-        // placer's timeout or `FIRST_START`, whichever is shorter. Later (a restart
-        // after the node was lost) once: the recovery queue retries, and the proxy's
-        // thread stays free for its commands.
-        let patient = !self.instantiated;
+        // placer's timeout or `FIRST_START`, whichever is shorter, the first snapshot
+        // included. Later (a retry of the recovery queue, whether or not the first
+        // start built anything) once: the queue retries, and the proxy's thread stays
+        // free for its commands.
+        let patient = !std::mem::replace(&mut self.asked_before, true);
         let asked = Instant::now();
         let deadline = asked
             + if patient {
@@ -1219,10 +1229,17 @@ impl End {
         // Built there. Seen once its snapshot comes: a start that fails on it leaves
         // the generation unbuilt (the next start builds a new one and sends this one
         // to `dead`), so that the proxy never runs an instance it cannot see.
-        self.instantiated = true;
         self.gone = None;
         *lock(&self.shared.lost) = None;
-        let snapshot = self.first_snapshot()?;
+        // Patient, the first snapshot has what is left of the first start's time (but
+        // at least `FIRST_SNAPSHOT`): the whole start stays within the compound's wait
+        // for its instances.
+        let snapshot_by = if patient {
+            deadline.max(Instant::now() + FIRST_SNAPSHOT)
+        } else {
+            Instant::now() + self.timeout
+        };
+        let snapshot = self.first_snapshot(snapshot_by)?;
         self.built = true;
         self.maybe_built = false;
         self.shared.heard();

@@ -230,7 +230,7 @@ fn a_node_lost_is_logged_once_when_it_goes_and_once_when_it_is_back() {
 }
 
 #[test]
-fn a_node_that_never_comes_fails_the_first_start_naming_it() {
+fn a_node_that_never_comes_fails_the_proxys_first_start_naming_it() {
     let _serial = capture();
     let (robot, _) = node("lonely-robot", &[]);
     let robot = Arc::new(robot);

@@ -62,12 +62,14 @@ impl clock_ignoring::Supervisor for NoSections {}
 impl clock_redundant::Supervisor for NoSections {}
 
 /// The parts of either compound: `w` fails while `fails`, `s` while `s_fails`; `w`'s
-/// `start` takes `slow_start` of real time, and fails while `w_start_fails`.
+/// `start` takes `slow_start` of real time, and fails while `w_start_fails`; `s`'s
+/// while `s_start_fails`.
 struct Parts {
     fails: Arc<AtomicBool>,
     s_fails: Arc<AtomicBool>,
     slow_start: Duration,
     w_start_fails: Arc<AtomicBool>,
+    s_start_fails: Arc<AtomicBool>,
 }
 
 impl Parts {
@@ -77,6 +79,7 @@ impl Parts {
             s_fails: Arc::clone(s_fails),
             slow_start: Duration::ZERO,
             w_start_fails: Arc::new(AtomicBool::new(false)),
+            s_start_fails: Arc::new(AtomicBool::new(false)),
         }
     }
 
@@ -85,7 +88,7 @@ impl Parts {
         Trippable {
             fails: Arc::clone(&self.s_fails),
             slow_start: Duration::ZERO,
-            start_fails: Arc::new(AtomicBool::new(false)),
+            start_fails: Arc::clone(&self.s_start_fails),
         }
     }
 
@@ -292,13 +295,39 @@ fn an_instance_that_cannot_start_is_substituted_from_the_start_and_recovered() {
 
 /// Under a policy that does not handle it (`restart`: nothing restarts from
 /// `starting_error`), an instance that cannot start leaves the compound unable to
-/// start, and the error names the instance and its reason.
+/// start, and the error names the instance and its reason. A restart of the compound
+/// starts it again: once it can start, the compound runs.
 #[test]
 fn an_instance_that_cannot_start_under_restart_fails_the_compounds_start() {
-    let never = Arc::new(AtomicBool::new(false));
-    let parts = Parts::new(&never, &never);
-    parts.w_start_fails.store(true, Ordering::SeqCst);
+    let (parts, start_fails) = w_cannot_start();
     let mut rig = CompoundRig::on_virtual_clock(clock_restarting::component("k", parts));
+    let _ = rig.system.run_all();
+    let failed = rig
+        .compound
+        .wait_for(|m| m.state != State::Starting, WAIT)
+        .expect("the compound's start ends");
+    assert_eq!(failed.state, State::StartingError);
+    let error = failed.error.unwrap_or_default();
+    assert!(
+        error.contains("instance `w` could not start") && error.contains("no device"),
+        "{error}"
+    );
+
+    start_fails.store(false, Ordering::SeqCst);
+    rig.command(coolbot::Controllable::Running)
+        .expect("the compound restarts");
+    rig.wait_instance_state("w", State::Running);
+    assert_eq!(rig.compound.state(), State::Running);
+    let _ = rig.system.shutdown();
+}
+
+/// A redundant group none of whose members can start has nothing to run on: the
+/// compound cannot start, and says which member could not.
+#[test]
+fn a_redundant_group_none_of_whose_members_can_start_fails_the_compounds_start() {
+    let (parts, _start_fails) = w_cannot_start();
+    parts.s_start_fails.store(true, Ordering::SeqCst);
+    let mut rig = CompoundRig::on_virtual_clock(clock_redundant::component("k", parts));
     let _ = rig.system.run_all();
     let failed = rig
         .compound
