@@ -451,8 +451,10 @@ fn merge_user_file(
     if !left.is_empty() {
         result.warnings.push(format!(
             "{} implements {} for a component that no longer has it (an atomic component \
-             made a compound, or the other way round): remove that block; src/main.rs may \
-             need the same change (coolc's current one: .coolc/stubs/src/main.rs)",
+             made a compound, or the other way round): remove that block; src/main.rs and \
+             the tests written when the crate was created (tests/components.rs, a test of \
+             the component named after it) may need the same change (coolc's current ones: \
+             .coolc/stubs/src/main.rs, .coolc/stubs/tests/components.rs)",
             file.path.display(),
             left.iter()
                 .map(|name| format!("`{name}`"))

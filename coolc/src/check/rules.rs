@@ -368,7 +368,12 @@ impl Typer<'_, '_, '_> {
         if !compatible(left_ty, right_ty) {
             let help = match (left_ty, right_ty) {
                 (RTy::Float, RTy::Int) | (RTy::Int, RTy::Float) => {
-                    Some("write float literals with a point, e.g. `3.0`".to_owned())
+                    let (int, float) = if matches!(left_ty, RTy::Int) {
+                        (left, right)
+                    } else {
+                        (right, left)
+                    };
+                    Some(numbers_help(int, float))
                 }
                 _ => self
                     .enum_variants(left_ty)
@@ -552,6 +557,28 @@ fn override_levels(instance: &ast::Instance) -> Option<Vec<String>> {
             }
             _ => None,
         })
+}
+
+/// Help for comparing the integer `int` with the float `float`: the literal to
+/// rewrite, or the variables' types.
+fn numbers_help(int: &ast::Expr, float: &ast::Expr) -> String {
+    let literal = |expr: &ast::Expr| match &expr.kind {
+        ast::ExprKind::Unary(_, inner) => {
+            matches!(inner.kind, ast::ExprKind::Int(_) | ast::ExprKind::Float(_))
+        }
+        kind => matches!(kind, ast::ExprKind::Int(_) | ast::ExprKind::Float(_)),
+    };
+    match (literal(int), literal(float)) {
+        (true, _) => "write float literals with a point, e.g. `3.0`".to_owned(),
+        (false, true) => {
+            "the other side is an integer: compare it with an integer literal, e.g. `2` \
+             (a rule compares numbers of one kind)"
+                .to_owned()
+        }
+        (false, false) => "an integer and a float are not compared: give both variables one kind \
+             (a rule compares numbers of one kind)"
+            .to_owned(),
+    }
 }
 
 #[cfg(test)]

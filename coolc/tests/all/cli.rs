@@ -868,7 +868,8 @@ fn an_atomic_component_made_a_compound_is_told_its_old_block_is_left() {
     assert!(
         stderr.contains(
             "warning: src/scanbot.rs implements `Behavior` for a component that no longer has it"
-        ) && stderr.contains(".coolc/stubs/src/main.rs"),
+        ) && stderr.contains(".coolc/stubs/src/main.rs")
+            && stderr.contains(".coolc/stubs/tests/components.rs"),
         "{stderr}"
     );
     // The compound's own blocks were added; an atomic's file gets no such warning.
