@@ -144,7 +144,7 @@ fn main() -> Result<ExitCode, Box<dyn std::error::Error>> {
         None => while !process.wait(Duration::from_secs(3600)) {},
     }
     for handle in &handles {
-        println!("{:#?}", handle.snapshot());
+        println!("{}", handle.snapshot());
     }
     let shutdown = process.shutdown(system);
     println!("{:?}", shutdown.report);

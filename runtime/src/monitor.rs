@@ -373,6 +373,60 @@ pub struct Supervision {
     pub detail: String,
 }
 
+/// A few lines for a person: what the component is doing, its variables, its timing
+/// and losses, and what went wrong (its error, a compound's last supervision step).
+/// `{:#?}` shows every field.
+impl std::fmt::Display for Monitor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.name, self.state)?;
+        if let Some(user) = &self.user_state {
+            write!(f, " in `{user}`")?;
+        }
+        match &self.result {
+            TaskResult::None => {}
+            TaskResult::Success(detail) => write!(f, ", succeeded: {detail}")?,
+            TaskResult::Fail(detail) => write!(f, ", failed: {detail}")?,
+        }
+        if let Some(error) = &self.error {
+            write!(f, "\n  error: {error}")?;
+        }
+        if !self.variables.is_empty() {
+            let variables: Vec<String> = self
+                .variables
+                .iter()
+                .map(|(name, value)| format!("{name} = {value}"))
+                .collect();
+            write!(f, "\n  {}", variables.join(", "))?;
+        }
+        write!(f, "\n  ")?;
+        if let Some(period) = self.period {
+            write!(f, "period {period:?}, ")?;
+        }
+        write!(
+            f,
+            "quality {}, cpu {:.1?}, in its calls {:.1?}; missed deadlines {}, overruns {}, \
+             packets lost {}, events dropped {}",
+            self.quality,
+            self.cpu_time,
+            self.elapsed_time,
+            self.missed_deadlines,
+            self.overruns,
+            self.overflows,
+            self.dropped_events
+        )?;
+        if let Some(group) = &self.group {
+            write!(f, "\n  execution group `{}`", group.name)?;
+        }
+        if self.supervision_steps > 0 {
+            write!(f, "\n  supervision steps {}", self.supervision_steps)?;
+            if let Some(last) = self.supervision.last() {
+                write!(f, "; the last: {last}")?;
+            }
+        }
+        Ok(())
+    }
+}
+
 impl std::fmt::Display for Supervision {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let instance = &self.instance;
@@ -1118,6 +1172,43 @@ mod tests {
         fn overflows(&self) -> u64 {
             self.0
         }
+    }
+
+    #[test]
+    fn a_monitor_reads_in_a_few_lines() {
+        let mut watched = monitor(vec![("count", Value::Int(10)), ("on", Value::Bool(true))]);
+        watched.state = State::Running;
+        watched.user_state = Some("counting".to_owned());
+        watched.period = Some(Duration::from_millis(100));
+        watched.cpu_time = Duration::from_micros(1200);
+        watched.elapsed_time = Duration::from_micros(300);
+        watched.overflows = 2;
+        assert_eq!(
+            watched.to_string(),
+            "watched: running in `counting`\n  count = 10, on = true\n  period 100ms, quality 0, \
+             cpu 1.2ms, in its calls 300.0\u{b5}s; missed deadlines 0, overruns 0, packets lost 2, \
+             events dropped 0"
+        );
+        watched.state = State::RunningError;
+        watched.error = Some("panic in state `counting`".to_owned());
+        watched.result = TaskResult::Fail("gave up".to_owned());
+        watched.supervision_steps = 3;
+        watched.supervision = vec![Supervision {
+            instance: "arm".to_owned(),
+            step: Step::Restarted,
+            detail: String::new(),
+        }];
+        let text = watched.to_string();
+        assert!(
+            text.starts_with(
+                "watched: running_error in `counting`, failed: gave up\n  error: panic in state `counting`\n"
+            ),
+            "{text}"
+        );
+        assert!(
+            text.ends_with("\n  supervision steps 3; the last: arm restarted"),
+            "{text}"
+        );
     }
 
     fn monitor(variables: Vec<(&str, Value)>) -> Monitor {
