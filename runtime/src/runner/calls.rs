@@ -340,7 +340,22 @@ impl Runner {
                 exception.name
             ));
         }
-        for step in exception.plan {
+        self.follow_plan(state, section, index, 0, &place, &message)
+    }
+
+    /// Follow exception `index`'s continuity plan from step `from`, for a failure in
+    /// `section` of `state` (at `place`, saying `message`).
+    fn follow_plan(
+        &mut self,
+        state: usize,
+        section: Option<Section>,
+        index: usize,
+        from: usize,
+        place: &str,
+        message: &str,
+    ) -> Recovery {
+        let exception = &self.spec.exceptions[index];
+        for (at, step) in exception.plan.iter().enumerate().skip(from) {
             match *step {
                 PlanStep::Ignore => {
                     crate::limited!(
@@ -362,6 +377,27 @@ impl Runner {
                 }
                 PlanStep::Retry { count, every } => {
                     let Some(section) = section else { continue };
+                    if count == 0 {
+                        continue;
+                    }
+                    // A member of an execution group does not sleep on the group's
+                    // thread: its periodic section is run again when due, and the
+                    // other members run meanwhile.
+                    if self.group.is_some() && section == Section::Periodic {
+                        self.retrying = Some(Retrying {
+                            state,
+                            exception: index,
+                            step: at,
+                            left: count,
+                            every,
+                            due: later(self.clock, every),
+                            // (Set by the caller, `Runner::periodic`.)
+                            deadline: self.clock,
+                            place: place.to_owned(),
+                            message: message.to_owned(),
+                        });
+                        return Recovery::Later;
+                    }
                     for _ in 0..count {
                         match self.time.as_virtual().filter(|_| self.harnessed) {
                             // A harness's clock is the component's own: the retry
@@ -383,6 +419,58 @@ impl Runner {
             "exception `{}` in {place}: {message}",
             exception.name
         ))
+    }
+
+    /// The retry of a periodic section that is due ([`Retrying`]): run it again; if
+    /// it fails, the next retry is due `every` later, or, none left, the rest of the
+    /// plan follows; then the periodic section is done (`Runner::periodic_done`).
+    /// True: it worked.
+    pub(super) fn retry_due(&mut self) -> bool {
+        let Some(retrying) = self.retrying.take() else {
+            return false;
+        };
+        let (state, deadline) = (retrying.state, retrying.deadline);
+        self.cx.deadline = Some(deadline);
+        let failed = self.run_section(state, Section::Periodic).is_err();
+        self.cx.deadline = None;
+        let outcome = if !failed {
+            Recovery::Recovered
+        } else if retrying.left > 1 {
+            self.retrying = Some(Retrying {
+                left: retrying.left - 1,
+                due: later(self.clock, retrying.every),
+                ..retrying
+            });
+            return true;
+        } else {
+            self.follow_plan(
+                state,
+                Some(Section::Periodic),
+                retrying.exception,
+                retrying.step + 1,
+                &retrying.place,
+                &retrying.message,
+            )
+        };
+        if let Recovery::Later = outcome {
+            // Another `retry` step of the plan.
+            if let Some(next) = self.retrying.as_mut() {
+                next.deadline = deadline;
+            }
+            return true;
+        }
+        match self.period_of(state) {
+            Some(period) => self.periodic_done(state, deadline, period, outcome),
+            None => {
+                self.next_periodic = None;
+                match outcome {
+                    Recovery::Goto(target) => self.pending_choice = Some(target),
+                    Recovery::Failed(message) => self.fail(message),
+                    Recovery::Recovered | Recovery::Later => {}
+                }
+            }
+        }
+        true
     }
 
     /// A failure no plan recovered: `running_error`.

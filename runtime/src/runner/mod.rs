@@ -116,6 +116,27 @@ enum Recovery {
     Recovered,
     Goto(usize),
     Failed(String),
+    /// A member of an execution group retries its periodic section later
+    /// ([`Retrying`]): the group runs on meanwhile.
+    Later,
+}
+
+/// A periodic section of an execution group's member that failed, to be run again
+/// when `due` by its continuity plan's `retry` step number `step`, `left` more times
+/// at most; the rest of the plan follows if none succeeds. Nothing else of the user
+/// automaton runs meanwhile, as on a thread of its own, where the retry sleeps.
+struct Retrying {
+    state: usize,
+    exception: usize,
+    step: usize,
+    left: u32,
+    every: Duration,
+    due: Instant,
+    /// The periodic deadline the section failed at.
+    deadline: Instant,
+    /// Where it failed and why, for the plan's messages.
+    place: String,
+    message: String,
 }
 
 /// What one turn of the loop ([`Runner::turn`]) found.
@@ -168,6 +189,8 @@ pub(crate) struct Runner {
     next_periodic: Option<Instant>,
     reanchored: bool,
     pending_choice: Option<usize>,
+    /// A periodic section retried later (a member of an execution group).
+    retrying: Option<Retrying>,
     max_response: Option<Duration>,
     /// The max_response watchdog's view of this component's sections (while it has a
     /// `max_response`).
@@ -307,6 +330,7 @@ impl Runner {
             next_periodic: None,
             reanchored: false,
             pending_choice: None,
+            retrying: None,
             max_response: timing.max_response,
             watch,
             cpu_due: now + CPU_TIME_REFRESH,
@@ -572,10 +596,14 @@ impl Runner {
     }
 
     /// The nearest timer of the current user state (`after` transitions, the periodic
-    /// deadline, a compound's own wake-up), while the user automaton runs.
+    /// deadline, a compound's own wake-up), while the user automaton runs; while a
+    /// periodic section waits for its retry, only the retry.
     pub(crate) fn next_due(&self) -> Option<Instant> {
         if self.state != State::Running {
             return None;
+        }
+        if let Some(retrying) = &self.retrying {
+            return Some(retrying.due);
         }
         let state_spec = self.spec.states.get(self.user)?;
         let mut deadline = self.next_periodic;
@@ -616,7 +644,10 @@ impl Runner {
             // No user automaton: only pull requests.
             return self.has_pull && self.serve_pulls();
         };
-        // 3. Timers.
+        // 3. Timers: first a periodic section's retry, which waits for nothing else.
+        if let Some(retrying) = &self.retrying {
+            return now >= retrying.due && self.retry_due();
+        }
         if let Some(target) = self.pending_choice.take() {
             self.goto(target, now);
             return true;

@@ -58,6 +58,7 @@ impl Runner {
                     // A restart leaves the user automaton of the failed run behind.
                     self.user_entered = false;
                     self.pending_choice = None;
+                    self.retrying = None;
                     self.publish_user(None);
                     if let Err(message) = self.run_start() {
                         self.set_error(Some(message));
@@ -80,6 +81,7 @@ impl Runner {
                     self.user = self.spec.initial;
                     self.user_entered = false;
                     self.pending_choice = None;
+                    self.retrying = None;
                     let initial = (!self.spec.states.is_empty()).then_some(self.spec.initial);
                     self.publish_user(initial);
                 }
@@ -204,7 +206,8 @@ impl Runner {
         let result = if self.user_entered && self.spec.states[self.user].exit {
             match self.section_with_plan(self.user, Section::Exit) {
                 Recovery::Failed(message) => Err(message),
-                Recovery::Recovered | Recovery::Goto(_) => Ok(()),
+                // (`Later` is a periodic section's only.)
+                Recovery::Recovered | Recovery::Goto(_) | Recovery::Later => Ok(()),
             }
         } else {
             Ok(())
@@ -212,6 +215,7 @@ impl Runner {
         self.user_entered = false;
         self.next_periodic = None;
         self.pending_choice = None;
+        self.retrying = None;
         self.publish_user(None);
         result
     }
@@ -247,6 +251,7 @@ impl Runner {
         self.cx.entered_at = now;
         self.suspended_at = None;
         self.pending_choice = None;
+        self.retrying = None;
         let unseen_count = std::mem::take(&mut self.arrivals_count_on_entry);
         for (index, input) in self.inputs.iter().enumerate() {
             let arrivals = input.arrivals();
@@ -279,7 +284,8 @@ impl Runner {
         self.publish_user(Some(target));
         if self.spec.states[target].entry {
             match self.section_with_plan(target, Section::Entry) {
-                Recovery::Recovered => {}
+                // (`Later` is a periodic section's only.)
+                Recovery::Recovered | Recovery::Later => {}
                 Recovery::Goto(state) => {
                     self.pending_choice = Some(state);
                     return;
@@ -301,12 +307,32 @@ impl Runner {
             return;
         };
         self.reanchored = false;
-        let mut missed_any = false;
         self.cx.deadline = Some(deadline);
         let outcome = self.section_with_plan(state, Section::Periodic);
         self.cx.deadline = None;
+        if let Recovery::Later = outcome {
+            // Retried later: the next deadline is scheduled once the retries are over
+            // (those they took are missed), as on a thread of its own.
+            if let Some(retrying) = self.retrying.as_mut() {
+                retrying.deadline = deadline;
+            }
+            return;
+        }
+        self.periodic_done(state, deadline, period, outcome);
+    }
+
+    /// After the periodic section of `state` due at `deadline` (of a `period`) and its
+    /// plan's `outcome`: schedule the next one, adapt, choose.
+    pub(super) fn periodic_done(
+        &mut self,
+        state: usize,
+        deadline: Instant,
+        period: Duration,
+        outcome: Recovery,
+    ) {
+        let mut missed_any = false;
         match outcome {
-            Recovery::Recovered => {}
+            Recovery::Recovered | Recovery::Later => {}
             Recovery::Goto(target) => self.pending_choice = Some(target),
             Recovery::Failed(message) => {
                 self.fail(message);
@@ -453,7 +479,8 @@ impl Runner {
                     Err(panic) => Failure::Panic(panic),
                 };
                 match self.recover(self.user, None, failure) {
-                    Recovery::Recovered => {}
+                    // (`Later` is a periodic section's only: this is no section.)
+                    Recovery::Recovered | Recovery::Later => {}
                     Recovery::Goto(target) => {
                         self.pending_choice = Some(target);
                         return true;

@@ -9,7 +9,7 @@ use std::time::Duration;
 use coolbot::{
     Clock, Command, Controllable, Error, GroupError, SectionResult, State, System, VirtualClock,
 };
-use coolbot_runtime_tests::generated::{blocking_relay, control_loop, last_loop};
+use coolbot_runtime_tests::generated::{blocking_relay, checker, control_loop, last_loop, sampler};
 use coolbot_runtime_tests::support::Log;
 use coolbot_runtime_tests::{relay, stage};
 
@@ -1068,4 +1068,84 @@ fn a_last_input_off_the_cycle_keeps_its_order() {
     tick(&clock);
     // `d` reads what `r` sent in this very pass.
     assert_eq!(log.take(), ["c:1", "r:2", "d:3"]);
+}
+
+/// `Checker`'s behaviour: takes its samples each period, and raises `stale` when none
+/// came since the last; logs `checked:<samples>` or `stale`.
+struct Checking(Log);
+
+impl checker::Behavior for Checking {
+    fn checking_periodic(&mut self, cx: &mut checker::Cx<'_>) -> SectionResult {
+        let mut samples = 0;
+        while cx.inputs.samples.recv().is_some() {
+            samples += 1;
+        }
+        if samples == 0 {
+            self.0.push("stale".to_owned());
+            return Err(checker::Exception::Stale.raise("no sample since the last period"));
+        }
+        cx.vars.taken += samples;
+        self.0.push(format!("checked:{samples}"));
+        Ok(())
+    }
+
+    fn on_stale(&mut self, _cx: &mut checker::Cx<'_>, _message: &str) {}
+}
+
+/// `Sampler`'s behaviour: one sample a period.
+struct Sampling;
+
+impl sampler::Behavior for Sampling {
+    fn sampling_periodic(&mut self, cx: &mut sampler::Cx<'_>) -> SectionResult {
+        cx.outputs.sample.send(1);
+        Ok(())
+    }
+}
+
+/// A member's `retry` does not hold the group's thread: the checker (10 ms) finds no
+/// sample every other period, and its retry a period later finds the one the sampler
+/// (20 ms), another member, sent meanwhile. On a thread the retry would sleep and
+/// the sampler could not run: the checker would fail.
+#[test]
+fn a_members_retry_waits_while_the_other_members_run() {
+    let log = Log::default();
+    let (mut system, clock) = system();
+    let checking = system
+        .add(checker::component("checker", Checking(log.clone())))
+        .expect("checker");
+    system
+        .add(sampler::component("sampler", Sampling))
+        .expect("sampler");
+    system
+        .connect("sampler.sample", "checker.samples")
+        .expect("sampler -> checker");
+    system
+        .group("control", &["sampler", "checker"])
+        .expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    for _ in 0..6 {
+        tick(&clock);
+    }
+    // At 10 ms no sample yet: `stale`, retried at 20 ms after the sampler's first
+    // sample; the deadline at 20 ms the retry took is missed (as it is on a thread of
+    // its own, where the retry sleeps); so on at 30 and 40, 50 and 60.
+    assert_eq!(
+        log.take(),
+        [
+            "stale",
+            "checked:1",
+            "stale",
+            "checked:1",
+            "stale",
+            "checked:1"
+        ],
+        "{}",
+        checking.snapshot()
+    );
+    let monitor = checking.snapshot();
+    assert_eq!(monitor.state, State::Running, "{monitor}");
+    assert_eq!(monitor.variables[0].1, coolbot::Value::UInt(3));
+    assert_eq!(monitor.missed_deadlines, 3, "{monitor}");
+    assert!(system.shutdown().clean());
 }
