@@ -223,7 +223,21 @@ fn normalize(path: &Path) -> PathBuf {
 /// Runs the CLI on parsed arguments.
 pub fn run(cli: Cli) -> ExitCode {
     let result = match &cli.command {
-        Commands::Check { files } => check(&cli, files).map(|_| ()),
+        Commands::Check { files } => check(&cli, files).map(|checked| {
+            // Silence would leave a person wondering whether anything was checked.
+            if cli.message_format == MessageFormat::Human {
+                let warnings = checked.warnings().len();
+                eprintln!(
+                    "coolc: {} description file(s) checked: no error{}",
+                    checked.sources().files().len(),
+                    if warnings == 0 {
+                        String::new()
+                    } else {
+                        format!(", {warnings} warning(s)")
+                    }
+                );
+            }
+        }),
         Commands::Compile {
             files,
             out,

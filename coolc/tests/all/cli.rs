@@ -107,6 +107,12 @@ fn exit_codes() {
 
     let out = coolc(&["check", ok], dir.path());
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("coolc: 4 description file(s) checked: no error"),
+        "mobile_base.cool and its three imports: {stderr}"
+    );
+    assert!(stderr.ends_with("checked: no error\n"), "{stderr}");
 
     let out = coolc(&["check", "broken.cool"], dir.path());
     assert_eq!(out.status.code(), Some(1));
