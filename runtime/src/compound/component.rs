@@ -108,7 +108,10 @@ impl Compound {
                 // A restart starts again what could not start before (what fails
                 // again is judged below). Its answer does not matter: its state does.
                 let _ = command(&instance.handle, Controllable::Ready);
-                monitor = instance.handle.snapshot();
+                monitor = instance
+                    .handle
+                    .wait_for(|m| m.state != State::Starting, INSTANCE_START_TIMEOUT)
+                    .map_err(RunError::from)?;
             }
             if monitor.state == State::StartingError && instance.handles_start_failure() {
                 // A fault its policy handles once the compound runs, as it would
@@ -138,13 +141,18 @@ impl Compound {
                 }
             }
         }
-        // A redundant group none of whose members started has nothing to run on.
+        // A redundant group none of whose members started (or is still there) has
+        // nothing to run on.
         for group in &self.groups {
-            if group
+            let failed = group
                 .iter()
-                .all(|m| self.instances[*m].handle.state() == State::StartingError)
-            {
-                let first = &self.instances[group[0]];
+                .find(|m| self.instances[**m].handle.state() == State::StartingError);
+            let none_started = group.iter().all(|m| {
+                self.instances[*m].status == Status::Destroyed
+                    || self.instances[*m].handle.state() == State::StartingError
+            });
+            if let (Some(failed), true) = (failed, none_started) {
+                let first = &self.instances[*failed];
                 return Err(RunError::CouldNotStart {
                     instance: first.name.clone(),
                     error: first.handle.snapshot().error.unwrap_or_default(),

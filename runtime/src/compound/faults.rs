@@ -252,6 +252,9 @@ impl Compound {
                 // on from the streams' numbers).
                 self.queue.remove(position);
                 self.instances[index].status = Status::Active;
+                // Its view shows it running now (its events may not have been taken
+                // yet): a failed member does not cover nor lead its group.
+                self.refresh(index);
                 if let Some(group) = self.instances[index].group {
                     let lane = self.groups[group].iter().position(|m| *m == index);
                     for merged in self.merges.iter().filter(|m| m.group == group) {

@@ -136,6 +136,12 @@ impl Runner {
             for track in &mut self.tracks {
                 track.last_arrival += pause;
             }
+            // A periodic section's retry waits on as a timer does, and the deadline
+            // it failed at moves with it: the pause is no missed deadline.
+            if let Some(retrying) = self.retrying.as_mut() {
+                retrying.due = later(retrying.due, pause);
+                retrying.deadline = later(retrying.deadline, pause);
+            }
         }
         self.next_periodic = self
             .period_of(self.user)
