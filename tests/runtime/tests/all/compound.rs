@@ -2656,6 +2656,14 @@ fn on_a_virtual_clock_packets_held_at_an_exported_input_move_on_without_an_advan
     // clock: w's queue fills with four packets and four wait at the compound's input.
     feed.kick.emit();
     wait_user(&w, "busy");
+    // `busy` is published before its entry section runs, and the entry drains the
+    // queue too: settled, w is past its entry and waits for the clock.
+    rig.rig
+        .clock
+        .as_ref()
+        .expect("a virtual clock")
+        .settle()
+        .expect("settles");
     for packet in 0..4 {
         feed.data.send(packet);
     }
