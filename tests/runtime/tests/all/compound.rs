@@ -2658,12 +2658,8 @@ fn on_a_virtual_clock_packets_held_at_an_exported_input_move_on_without_an_advan
     wait_user(&w, "busy");
     // `busy` is published before its entry section runs, and the entry drains the
     // queue too: settled, w is past its entry and waits for the clock.
-    rig.rig
-        .clock
-        .as_ref()
-        .expect("a virtual clock")
-        .settle()
-        .expect("settles");
+    let clock = rig.rig.clock.clone().expect("a virtual clock");
+    clock.settle().expect("settles");
     for packet in 0..4 {
         feed.data.send(packet);
     }
@@ -2675,12 +2671,7 @@ fn on_a_virtual_clock_packets_held_at_an_exported_input_move_on_without_an_advan
     // handles it, which tries to pass the four on (they came before the command);
     // settling waits for that turn: they wait at the compound's input.
     base.command(Command::SetPriority(0)).expect("sync");
-    rig.rig
-        .clock
-        .as_ref()
-        .expect("a virtual clock")
-        .settle()
-        .expect("settles");
+    clock.settle().expect("settles");
     // The test empties w's queue, the clock standing still: the four waiting move on.
     assert_eq!(w_data.drain().collect::<Vec<_>>(), [0, 1, 2, 3]);
     eventually(|| w_data.len() == 4, "the held packets reach w");

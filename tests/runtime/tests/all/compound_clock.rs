@@ -301,17 +301,7 @@ fn an_instance_that_cannot_start_is_substituted_from_the_start_and_recovered() {
 fn an_instance_that_cannot_start_under_restart_fails_the_compounds_start() {
     let (parts, start_fails) = w_cannot_start();
     let mut rig = CompoundRig::on_virtual_clock(clock_restarting::component("k", parts));
-    let _ = rig.system.run_all();
-    let failed = rig
-        .compound
-        .wait_for(|m| m.state != State::Starting, WAIT)
-        .expect("the compound's start ends");
-    assert_eq!(failed.state, State::StartingError);
-    let error = failed.error.unwrap_or_default();
-    assert!(
-        error.contains("instance `w` could not start") && error.contains("no device"),
-        "{error}"
-    );
+    fails_to_start_for_w(&mut rig);
 
     start_fails.store(false, Ordering::SeqCst);
     rig.command(coolbot::Controllable::Running)
@@ -328,6 +318,13 @@ fn a_redundant_group_none_of_whose_members_can_start_fails_the_compounds_start()
     let (parts, _start_fails) = w_cannot_start();
     parts.s_start_fails.store(true, Ordering::SeqCst);
     let mut rig = CompoundRig::on_virtual_clock(clock_redundant::component("k", parts));
+    fails_to_start_for_w(&mut rig);
+    let _ = rig.system.shutdown();
+}
+
+/// Run the system of `rig`: its compound's start ends in `starting_error`, naming
+/// `w` and why it could not start.
+fn fails_to_start_for_w(rig: &mut CompoundRig) {
     let _ = rig.system.run_all();
     let failed = rig
         .compound
@@ -339,7 +336,6 @@ fn a_redundant_group_none_of_whose_members_can_start_fails_the_compounds_start()
         error.contains("instance `w` could not start") && error.contains("no device"),
         "{error}"
     );
-    let _ = rig.system.shutdown();
 }
 
 /// `Parts` whose `w` cannot start until the flag returned is cleared.
