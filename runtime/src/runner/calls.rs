@@ -297,20 +297,29 @@ impl Runner {
         }
     }
 
-    /// Run a section and its continuity plan if it fails.
-    pub(super) fn section_with_plan(&mut self, state: usize, section: Section) -> Recovery {
+    /// Run a section and its continuity plan if it fails. With `then` (what the
+    /// section is part of), a member of an execution group retries it later
+    /// ([`Recovery::Later`]); without, a retry waits on the thread.
+    pub(super) fn section_with_plan(
+        &mut self,
+        state: usize,
+        section: Section,
+        then: Option<Then>,
+    ) -> Recovery {
         match self.run_section(state, section) {
             Ok(()) => Recovery::Recovered,
-            Err(failure) => self.recover(state, Some(section), failure),
+            Err(failure) => self.recover(state, Some(section), failure, then),
         }
     }
 
-    /// Run the continuity plan for a failure in `state` (paper 3.5).
+    /// Run the continuity plan for a failure in `state` (paper 3.5); `then` as for
+    /// [`Runner::section_with_plan`].
     pub(super) fn recover(
         &mut self,
         state: usize,
         section: Option<Section>,
         failure: Failure,
+        then: Option<Then>,
     ) -> Recovery {
         let place = match (self.spec.states.get(state), section) {
             (Some(spec), Some(section)) => format!("state `{}` ({section:?} section)", spec.name),
@@ -340,17 +349,18 @@ impl Runner {
                 exception.name
             ));
         }
-        self.follow_plan(state, section, index, 0, &place, &message)
+        self.follow_plan(state, section, (index, 0), then, &place, &message)
     }
 
-    /// Follow exception `index`'s continuity plan from step `from`, for a failure in
-    /// `section` of `state` (at `place`, saying `message`).
+    /// Follow the continuity plan of exception `index` from its step `from` (`plan`),
+    /// for a failure in `section` of `state` (at `place`, saying `message`; `then` as
+    /// for [`Runner::section_with_plan`]).
     fn follow_plan(
         &mut self,
         state: usize,
         section: Option<Section>,
-        index: usize,
-        from: usize,
+        (index, from): (usize, usize),
+        then: Option<Then>,
         place: &str,
         message: &str,
     ) -> Recovery {
@@ -381,9 +391,9 @@ impl Runner {
                         continue;
                     }
                     // A member of an execution group does not sleep on the group's
-                    // thread: its periodic section is run again when due, and the
-                    // other members run meanwhile.
-                    if self.group.is_some() && section == Section::Periodic {
+                    // thread: its section is run again when due, and the other
+                    // members run meanwhile.
+                    if let Some(then) = then.filter(|_| self.group.is_some()) {
                         self.retrying = Some(Retrying {
                             state,
                             exception: index,
@@ -391,8 +401,7 @@ impl Runner {
                             left: count,
                             every,
                             due: later(self.clock, every),
-                            // (Set by the caller, `Runner::periodic`.)
-                            deadline: self.clock,
+                            then,
                             place: place.to_owned(),
                             message: message.to_owned(),
                         });
@@ -421,17 +430,19 @@ impl Runner {
         ))
     }
 
-    /// The retry of a periodic section that is due ([`Retrying`]): run it again; if
-    /// it fails, the next retry is due `every` later, or, none left, the rest of the
-    /// plan follows; then the periodic section is done (`Runner::periodic_done`).
-    /// True: it worked.
+    /// The retry that is due ([`Retrying`]): run the section again; if it fails, the
+    /// next retry is due `every` later, or, none left, the rest of the plan follows;
+    /// then what the section is part of goes on ([`Then`]). True: it ran.
     pub(super) fn retry_due(&mut self) -> bool {
         let Some(retrying) = self.retrying.take() else {
             return false;
         };
-        let (state, deadline) = (retrying.state, retrying.deadline);
-        self.cx.deadline = Some(deadline);
-        let failed = self.run_section(state, Section::Periodic).is_err();
+        let (state, then) = (retrying.state, retrying.then);
+        let section = then.section();
+        if let Then::Periodic { deadline, .. } = then {
+            self.cx.deadline = Some(deadline);
+        }
+        let failed = self.run_section(state, section).is_err();
         self.cx.deadline = None;
         let outcome = if !failed {
             Recovery::Recovered
@@ -445,30 +456,21 @@ impl Runner {
         } else {
             self.follow_plan(
                 state,
-                Some(Section::Periodic),
-                retrying.exception,
-                retrying.step + 1,
+                Some(section),
+                (retrying.exception, retrying.step + 1),
+                Some(then),
                 &retrying.place,
                 &retrying.message,
             )
         };
-        if let Recovery::Later = outcome {
+        match (then, outcome) {
             // Another `retry` step of the plan.
-            if let Some(next) = self.retrying.as_mut() {
-                next.deadline = deadline;
+            (_, Recovery::Later) => {}
+            (Then::Periodic { deadline, period }, outcome) => {
+                self.periodic_done(state, deadline, period, outcome);
             }
-            return true;
-        }
-        match self.period_of(state) {
-            Some(period) => self.periodic_done(state, deadline, period, outcome),
-            None => {
-                self.next_periodic = None;
-                match outcome {
-                    Recovery::Goto(target) => self.pending_choice = Some(target),
-                    Recovery::Failed(message) => self.fail(message),
-                    Recovery::Recovered | Recovery::Later => {}
-                }
-            }
+            (Then::Entered, outcome) => self.entered(state, outcome),
+            (Then::Enter { target }, outcome) => self.exited(target, self.clock, outcome),
         }
         true
     }

@@ -116,15 +116,15 @@ enum Recovery {
     Recovered,
     Goto(usize),
     Failed(String),
-    /// A member of an execution group retries its periodic section later
-    /// ([`Retrying`]): the group runs on meanwhile.
+    /// A member of an execution group retries a section later ([`Retrying`]): the
+    /// group runs on meanwhile.
     Later,
 }
 
-/// A periodic section of an execution group's member that failed, to be run again
-/// when `due` by its continuity plan's `retry` step number `step`, `left` more times
-/// at most; the rest of the plan follows if none succeeds. Nothing else of the user
-/// automaton runs meanwhile, as on a thread of its own, where the retry sleeps.
+/// A section of an execution group's member that failed, to be run again when `due`
+/// by its continuity plan's `retry` step number `step`, `left` more times at most; the
+/// rest of the plan follows if none succeeds. Nothing else of the user automaton runs
+/// meanwhile, as on a thread of its own, where the retry sleeps.
 struct Retrying {
     state: usize,
     exception: usize,
@@ -132,11 +132,35 @@ struct Retrying {
     left: u32,
     every: Duration,
     due: Instant,
-    /// The periodic deadline the section failed at.
-    deadline: Instant,
+    /// Which section it is, and what follows it once it worked or its plan ended.
+    then: Then,
     /// Where it failed and why, for the plan's messages.
     place: String,
     message: String,
+}
+
+/// What a section is part of, and so what follows it when its plan's `retry` runs it
+/// later ([`Retrying`]).
+#[derive(Debug, Clone, Copy)]
+enum Then {
+    /// The periodic section due at `deadline`, of a `period`: the next deadline is
+    /// scheduled (`Runner::periodic_done`).
+    Periodic { deadline: Instant, period: Duration },
+    /// The entry section of the state: the state is entered (its `choose`).
+    Entered,
+    /// The exit section of the state on a user transition to `target`: `target` is
+    /// entered.
+    Enter { target: usize },
+}
+
+impl Then {
+    fn section(self) -> Section {
+        match self {
+            Then::Periodic { .. } => Section::Periodic,
+            Then::Entered => Section::Entry,
+            Then::Enter { .. } => Section::Exit,
+        }
+    }
 }
 
 /// What one turn of the loop ([`Runner::turn`]) found.
@@ -189,7 +213,7 @@ pub(crate) struct Runner {
     next_periodic: Option<Instant>,
     reanchored: bool,
     pending_choice: Option<usize>,
-    /// A periodic section retried later (a member of an execution group).
+    /// A section retried later (a member of an execution group).
     retrying: Option<Retrying>,
     max_response: Option<Duration>,
     /// The max_response watchdog's view of this component's sections (while it has a
@@ -597,7 +621,7 @@ impl Runner {
 
     /// The nearest timer of the current user state (`after` transitions, the periodic
     /// deadline, a compound's own wake-up), while the user automaton runs; while a
-    /// periodic section waits for its retry, only the retry.
+    /// section waits for its retry, only the retry.
     pub(crate) fn next_due(&self) -> Option<Instant> {
         if self.state != State::Running {
             return None;
@@ -644,7 +668,7 @@ impl Runner {
             // No user automaton: only pull requests.
             return self.has_pull && self.serve_pulls();
         };
-        // 3. Timers: first a periodic section's retry, which waits for nothing else.
+        // 3. Timers: first a section's retry, which waits for nothing else.
         if let Some(retrying) = &self.retrying {
             return now >= retrying.due && self.retry_due();
         }

@@ -136,11 +136,13 @@ impl Runner {
             for track in &mut self.tracks {
                 track.last_arrival += pause;
             }
-            // A periodic section's retry waits on as a timer does, and the deadline
-            // it failed at moves with it: the pause is no missed deadline.
+            // A section's retry waits on as a timer does, and a periodic deadline it
+            // failed at moves with it: the pause is no missed deadline.
             if let Some(retrying) = self.retrying.as_mut() {
                 retrying.due = later(retrying.due, pause);
-                retrying.deadline = later(retrying.deadline, pause);
+                if let Then::Periodic { deadline, .. } = &mut retrying.then {
+                    *deadline = later(*deadline, pause);
+                }
             }
         }
         self.next_periodic = self
@@ -210,9 +212,10 @@ impl Runner {
     /// transition.
     pub(super) fn exit_user(&mut self) -> Result<(), String> {
         let result = if self.user_entered && self.spec.states[self.user].exit {
-            match self.section_with_plan(self.user, Section::Exit) {
+            // (A transition of the default automaton ends before the next command:
+            // a retry waits on the thread, in a group too.)
+            match self.section_with_plan(self.user, Section::Exit, None) {
                 Recovery::Failed(message) => Err(message),
-                // (`Later` is a periodic section's only.)
                 Recovery::Recovered | Recovery::Goto(_) | Recovery::Later => Ok(()),
             }
         } else {
@@ -234,15 +237,28 @@ impl Runner {
             return;
         }
         if self.user_entered && self.spec.states[self.user].exit {
-            if let Recovery::Failed(message) = self.section_with_plan(self.user, Section::Exit) {
-                self.fail(message);
-                return;
+            let then = Some(Then::Enter { target });
+            match self.section_with_plan(self.user, Section::Exit, then) {
+                // Retried later: `target` is entered once the retries are over.
+                Recovery::Later => {}
+                outcome => self.exited(target, now, outcome),
             }
-            if self.state != State::Running {
-                return;
-            }
+            return;
         }
         self.enter(target, now);
+    }
+
+    /// After the exit section of a user transition to `target` and its plan's
+    /// `outcome` (a `goto` in the plan is no other target: the transition goes on),
+    /// at `now`.
+    pub(super) fn exited(&mut self, target: usize, now: Instant, outcome: Recovery) {
+        if let Recovery::Failed(message) = outcome {
+            self.fail(message);
+            return;
+        }
+        if self.state == State::Running {
+            self.enter(target, now);
+        }
     }
 
     /// Enter user state `target` and run its entry section.
@@ -288,21 +304,23 @@ impl Runner {
             self.automaton.entered(target);
         }
         self.publish_user(Some(target));
-        if self.spec.states[target].entry {
-            match self.section_with_plan(target, Section::Entry) {
-                // (`Later` is a periodic section's only.)
-                Recovery::Recovered | Recovery::Later => {}
-                Recovery::Goto(state) => {
-                    self.pending_choice = Some(state);
-                    return;
-                }
-                Recovery::Failed(message) => {
-                    self.fail(message);
-                    return;
-                }
-            }
+        let outcome = if self.spec.states[target].entry {
+            self.section_with_plan(target, Section::Entry, Some(Then::Entered))
+        } else {
+            Recovery::Recovered
+        };
+        self.entered(target, outcome);
+    }
+
+    /// After the entry section of `state` and its plan's `outcome`: its `choose`.
+    pub(super) fn entered(&mut self, state: usize, outcome: Recovery) {
+        match outcome {
+            Recovery::Recovered => self.choose(state),
+            // Retried later: the state is entered once the retries are over.
+            Recovery::Later => {}
+            Recovery::Goto(target) => self.pending_choice = Some(target),
+            Recovery::Failed(message) => self.fail(message),
         }
-        self.choose(target);
     }
 
     /// Run the periodic section due at `deadline`; schedule the next one.
@@ -314,16 +332,9 @@ impl Runner {
         };
         self.reanchored = false;
         self.cx.deadline = Some(deadline);
-        let outcome = self.section_with_plan(state, Section::Periodic);
+        let then = Then::Periodic { deadline, period };
+        let outcome = self.section_with_plan(state, Section::Periodic, Some(then));
         self.cx.deadline = None;
-        if let Recovery::Later = outcome {
-            // Retried later: the next deadline is scheduled once the retries are over
-            // (those they took are missed), as on a thread of its own.
-            if let Some(retrying) = self.retrying.as_mut() {
-                retrying.deadline = deadline;
-            }
-            return;
-        }
         self.periodic_done(state, deadline, period, outcome);
     }
 
@@ -338,7 +349,10 @@ impl Runner {
     ) {
         let mut missed_any = false;
         match outcome {
-            Recovery::Recovered | Recovery::Later => {}
+            Recovery::Recovered => {}
+            // Retried later: the next deadline is scheduled once the retries are over
+            // (those they took are missed), as on a thread of its own.
+            Recovery::Later => return,
             Recovery::Goto(target) => self.pending_choice = Some(target),
             Recovery::Failed(message) => {
                 self.fail(message);
@@ -484,8 +498,8 @@ impl Runner {
                     Ok(Err(fault)) => Failure::Fault(fault),
                     Err(panic) => Failure::Panic(panic),
                 };
-                match self.recover(self.user, None, failure) {
-                    // (`Later` is a periodic section's only: this is no section.)
+                match self.recover(self.user, None, failure, None) {
+                    // (`Later` is a section's only: this is no section.)
                     Recovery::Recovered | Recovery::Later => {}
                     Recovery::Goto(target) => {
                         self.pending_choice = Some(target);

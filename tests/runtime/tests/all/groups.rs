@@ -9,7 +9,9 @@ use std::time::Duration;
 use coolbot::{
     Clock, Command, Controllable, Error, GroupError, SectionResult, State, System, VirtualClock,
 };
-use coolbot_runtime_tests::generated::{blocking_relay, checker, control_loop, last_loop, sampler};
+use coolbot_runtime_tests::generated::{
+    blocking_relay, checker, control_loop, last_loop, latch, sampler,
+};
 use coolbot_runtime_tests::support::Log;
 use coolbot_runtime_tests::{relay, stage};
 
@@ -1147,5 +1149,90 @@ fn a_members_retry_waits_while_the_other_members_run() {
     assert_eq!(monitor.state, State::Running, "{monitor}");
     assert_eq!(monitor.variables[0].1, coolbot::Value::UInt(3));
     assert_eq!(monitor.missed_deadlines, 3, "{monitor}");
+    assert!(system.shutdown().clean());
+}
+
+/// `Latch`'s behaviour: each section with a sample to take logs it, and one without
+/// raises `stale`, logging `<section>:stale`.
+struct Latching(Log);
+
+impl Latching {
+    fn take(&self, section: &str, cx: &mut latch::Cx<'_>) -> SectionResult {
+        match cx.inputs.samples.recv() {
+            Some(sample) => {
+                self.0.push(format!("{section}:{sample}"));
+                Ok(())
+            }
+            None => {
+                self.0.push(format!("{section}:stale"));
+                Err(latch::Exception::Stale.raise("no sample yet"))
+            }
+        }
+    }
+}
+
+impl latch::Behavior for Latching {
+    fn opening_entry(&mut self, cx: &mut latch::Cx<'_>) -> SectionResult {
+        self.take("entry", cx)
+    }
+
+    fn opening_exit(&mut self, cx: &mut latch::Cx<'_>) -> SectionResult {
+        self.take("exit", cx)
+    }
+
+    fn open_entry(&mut self, _cx: &mut latch::Cx<'_>) -> SectionResult {
+        self.0.push("open".to_owned());
+        Ok(())
+    }
+
+    fn on_stale(&mut self, _cx: &mut latch::Cx<'_>, _message: &str) {}
+}
+
+/// Nor does a `retry` of an entry or an exit section: the latch's entry finds its
+/// sample at 20 ms, once the sampler (20 ms), another member, sent it; its exit, due
+/// at once (`after 5ms`), finds the next one at 40 ms; nothing else of the latch runs
+/// meanwhile. On a thread the retries would sleep and the sampler could not run: the
+/// latch would fail on entering its first state.
+#[test]
+fn a_members_entry_and_exit_retries_wait_while_the_other_members_run() {
+    let log = Log::default();
+    let (mut system, clock) = system();
+    let latching = system
+        .add(latch::component("latch", Latching(log.clone())))
+        .expect("latch");
+    system
+        .add(sampler::component("sampler", Sampling))
+        .expect("sampler");
+    system
+        .connect("sampler.sample", "latch.samples")
+        .expect("sampler -> latch");
+    system
+        .group("control", &["latch", "sampler"])
+        .expect("group");
+    system.run_all().expect("running");
+    clock.settle().expect("settled");
+    let steps: [&[&str]; 5] = [
+        &["entry:stale"],
+        &["entry:stale"],
+        &["entry:1", "exit:stale"],
+        &["exit:stale"],
+        &["exit:1", "open"],
+    ];
+    for (at, expected) in steps.iter().enumerate() {
+        if at > 0 {
+            tick(&clock);
+        }
+        assert_eq!(
+            log.take(),
+            *expected,
+            "at {} ms: {}",
+            at * 10,
+            latching.snapshot()
+        );
+        let monitor = latching.snapshot();
+        assert_eq!(monitor.state, State::Running, "{monitor}");
+    }
+    let monitor = latching.snapshot();
+    assert_eq!(monitor.user_state.as_deref(), Some("open"), "{monitor}");
     assert!(system.shutdown().clean());
 }
