@@ -4,7 +4,7 @@
 //! pane share it; the tests of a remote instance's death, and of a driver in a
 //! process of its own, share the waits for a compound's steps.
 
-use coolbot::{Handle, Monitor, SectionResult, Step};
+use coolbot::{Handle, Monitor, SectionResult, Step, System};
 use coolbot_zenoh::agent::Registry;
 
 use crate::generated::{dying_cell, flaky};
@@ -55,6 +55,16 @@ pub fn wait_step(compound: &Handle, instance: &str, step: fn(&Step) -> bool, wha
         .find(|s| s.instance == instance && step(&s.step))
         .map(|s| s.detail)
         .unwrap_or_default()
+}
+
+/// The cell (`cell`) added to `system`, whose components are all told to run: its
+/// remote instance goes through this thread's placer.
+pub fn started_cell(system: &mut System) -> Handle {
+    let cell = system
+        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
+        .expect("the cell is added");
+    system.run_all().expect("the system runs");
+    cell
 }
 
 /// `Flaky`'s behaviour: counts its periods.

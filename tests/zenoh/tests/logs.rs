@@ -14,8 +14,8 @@ use std::time::Duration;
 use coolbot::{MonitorEvent, OutputKind, State, Step, System};
 use coolbot_zenoh::agent::{Agent, Instantiate, instantiate};
 use coolbot_zenoh::{Error, Placer};
-use coolbot_zenoh_tests::dying::{Parts, registry};
-use coolbot_zenoh_tests::generated::{dying_cell, latest};
+use coolbot_zenoh_tests::dying::{registry, started_cell};
+use coolbot_zenoh_tests::generated::latest;
 use coolbot_zenoh_tests::support::{PATIENCE, node, pair, wait_subscribed, wait_until};
 use zenoh::Wait;
 
@@ -131,10 +131,7 @@ fn a_node_lost_is_logged_once_when_it_goes_and_once_when_it_is_back() {
     let (first, agent) = station("first");
     let _placer = Placer::new(Arc::clone(&robot), registry()).install();
     let mut system = System::new();
-    let cell = system
-        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
-        .unwrap();
-    system.run_all().unwrap();
+    let cell = started_cell(&mut system);
     cell.instance("flaky")
         .unwrap()
         .wait_for(|m| m.state == State::Running, PATIENCE)
@@ -264,11 +261,8 @@ fn a_node_that_never_comes_fails_the_proxys_first_start_naming_it() {
 
     let _placer = Placer::new(Arc::clone(&robot), registry()).install();
     let mut system = System::new();
-    let cell = system
-        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
-        .unwrap();
     // The proxy cannot start: its fault (the spare stands in) says why.
-    system.run_all().unwrap();
+    let cell = started_cell(&mut system);
     let error = coolbot_zenoh_tests::dying::wait_step(
         &cell,
         "flaky",

@@ -12,7 +12,7 @@ use coolbot::{Command, Controllable, Handle, Monitor, SectionResult, State, Step
 use coolbot_zenoh::agent::{Agent, Registry};
 use coolbot_zenoh::ctl::Ctl;
 use coolbot_zenoh::{ControlReply, Node, Placer};
-use coolbot_zenoh_tests::dying::{self, Counting, Parts, counted, registry};
+use coolbot_zenoh_tests::dying::{self, Counting, Parts, counted, registry, started_cell};
 use coolbot_zenoh_tests::generated::{dying_cell, finisher, finishing_cell, flaky};
 use coolbot_zenoh_tests::support::{PATIENCE, pair, wait_until};
 use zenoh::Wait;
@@ -49,10 +49,7 @@ fn built(ctl: &Ctl) -> Vec<(String, State)> {
 /// The cell, built and running on this thread's placer, with its remote instance
 /// counting.
 fn running_cell(system: &mut System) -> Handle {
-    let cell = system
-        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
-        .unwrap();
-    system.run_all().unwrap();
+    let cell = started_cell(system);
     cell.instance("flaky")
         .expect("the proxy")
         .wait_for(|m| m.state == State::Running && periods(m) > 0, PATIENCE)
@@ -182,40 +179,54 @@ fn running_snapshot() -> Vec<u8> {
     serde_json::to_vec(&harness.monitor()).unwrap()
 }
 
-fn mute_station(node: &Node) -> Mute {
+/// The control and monitoring queryables of every instance on the dying station: its
+/// control port accepts every command, its monitoring port answers a running
+/// `Flaky`'s snapshot whenever `answer` says so.
+fn station_ports(
+    session: &zenoh::Session,
+    answer: impl Fn() -> bool + Send + Sync + 'static,
+) -> [zenoh::query::Queryable<()>; 2] {
     let snapshot = running_snapshot();
+    let control = session
+        .declare_queryable("coolbot/dying-station/*/c")
+        .callback(|query| accept(&query))
+        .wait()
+        .unwrap();
+    let monitor = session
+        .declare_queryable("coolbot/dying-station/*/m")
+        .callback(move |query| {
+            if answer() {
+                let _ = query
+                    .reply(query.key_expr().clone(), snapshot.clone())
+                    .wait();
+            }
+        })
+        .wait()
+        .unwrap();
+    [control, monitor]
+}
+
+fn mute_station(node: &Node) -> Mute {
     let answering = Arc::new(AtomicBool::new(true));
     let answered = Arc::new(AtomicU64::new(0));
     let (answers, count) = (Arc::clone(&answering), Arc::clone(&answered));
-    let session = node.session();
-    let queryables = vec![
-        session
-            .declare_queryable(coolbot_zenoh::keys::agent("dying-station", "*", "*"))
-            .callback(|query| accept(&query))
-            .wait()
-            .unwrap(),
-        session
-            .declare_queryable("coolbot/dying-station/*/c")
-            .callback(|query| accept(&query))
-            .wait()
-            .unwrap(),
-        session
-            .declare_queryable("coolbot/dying-station/*/m")
-            .callback(move |query| {
-                if answers.load(Ordering::Acquire) {
-                    count.fetch_add(1, Ordering::AcqRel);
-                    let _ = query
-                        .reply(query.key_expr().clone(), snapshot.clone())
-                        .wait();
-                }
-            })
-            .wait()
-            .unwrap(),
-    ];
+    let queryables = station_ports(node.session(), move || {
+        let answering = answers.load(Ordering::Acquire);
+        if answering {
+            count.fetch_add(1, Ordering::AcqRel);
+        }
+        answering
+    });
+    let agent = node
+        .session()
+        .declare_queryable(coolbot_zenoh::keys::agent("dying-station", "*", "*"))
+        .callback(|query| accept(&query))
+        .wait()
+        .unwrap();
     Mute {
         answering,
         answered,
-        _queryables: queryables,
+        _queryables: [agent].into_iter().chain(queryables).collect(),
     }
 }
 
@@ -236,22 +247,8 @@ fn late_station(node: &Node, late: Duration) -> Arc<Mutex<Vec<zenoh::query::Quer
             let (session, keep) = (session.clone(), Arc::clone(&keep));
             std::thread::spawn(move || {
                 std::thread::sleep(late);
-                let snapshot = running_snapshot();
-                let control = session
-                    .declare_queryable("coolbot/dying-station/*/c")
-                    .callback(|query| accept(&query))
-                    .wait()
-                    .unwrap();
-                let monitor = session
-                    .declare_queryable("coolbot/dying-station/*/m")
-                    .callback(move |query| {
-                        let _ = query
-                            .reply(query.key_expr().clone(), snapshot.clone())
-                            .wait();
-                    })
-                    .wait()
-                    .unwrap();
-                keep.lock().unwrap().extend([control, monitor]);
+                let ports = station_ports(&session, || true);
+                keep.lock().unwrap().extend(ports);
             });
         })
         .wait()
@@ -270,10 +267,7 @@ fn an_instance_whose_ports_are_known_after_its_agent_answered_starts() {
     let _late = late_station(&station, Duration::from_millis(300));
     let _placer = Placer::new(Arc::clone(&robot), registry()).install();
     let mut system = System::new();
-    let cell = system
-        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
-        .unwrap();
-    system.run_all().unwrap();
+    let cell = started_cell(&mut system);
     let proxy = cell.instance("flaky").expect("the proxy");
     proxy
         .wait_for(|m| m.state == State::Running, PATIENCE)
@@ -293,10 +287,7 @@ fn a_remote_instance_whose_monitoring_port_falls_silent_is_substituted() {
         .silence(silence)
         .install();
     let mut system = System::new();
-    let cell = system
-        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
-        .unwrap();
-    system.run_all().unwrap();
+    let cell = started_cell(&mut system);
     let proxy = cell.instance("flaky").expect("the proxy");
     proxy
         .wait_for(|m| m.state == State::Running, PATIENCE)
@@ -535,10 +526,7 @@ fn a_remote_instance_whose_node_does_not_serve_at_start_is_substituted_then_buil
         .timeout(Duration::from_secs(1))
         .install();
     let mut system = System::new();
-    let cell = system
-        .add(dying_cell::component("cell", Parts).expect("the compound builds"))
-        .unwrap();
-    system.run_all().unwrap();
+    let cell = started_cell(&mut system);
     let detail = wait_step(&cell, |s| *s == Step::Failed, "the proxy cannot start");
     assert!(detail.contains("dying-station"), "{detail}");
     wait_step(
