@@ -1113,9 +1113,20 @@ impl Shared {
         Some((monitor.state, monitor.user_state.clone()))
     }
 
-    /// Record adaptation step `step`: the history, the counter, and the event.
-    pub(crate) fn adaptation_step(&self, step: Adaptation, f: impl FnOnce(&mut AdaptStatus)) {
-        tracing::info!(component = %step.component, "adaptation: {step}");
+    /// Record adaptation step `step`: the history, the counter, and the event; log it
+    /// (at info, or at debug when `logged` is false: a step a supervisor commanded,
+    /// whose own step was logged).
+    pub(crate) fn adaptation_step(
+        &self,
+        step: Adaptation,
+        logged: bool,
+        f: impl FnOnce(&mut AdaptStatus),
+    ) {
+        if logged {
+            tracing::info!(component = %step.component, "adaptation: {step}");
+        } else {
+            tracing::debug!(component = %step.component, "adaptation: {step}");
+        }
         self.update(|monitor| {
             let status = &mut monitor.adaptation;
             f(status);

@@ -116,7 +116,7 @@ impl Compound {
         let shared = cx.shared.clone();
         let publish = |step: Adaptation, cap: u32, floor: u32| {
             if let Some(shared) = &shared {
-                shared.adaptation_step(step, |status| {
+                shared.adaptation_step(step, true, |status| {
                     status.level = cap;
                     status.floor = floor;
                 });

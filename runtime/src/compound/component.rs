@@ -469,7 +469,7 @@ impl Driven for Compound {
             };
             let floor = coordinator.floor;
             if let Some(shared) = &cx.shared {
-                shared.adaptation_step(step, |status| {
+                shared.adaptation_step(step, true, |status| {
                     status.level = level;
                     status.floor = floor;
                 });

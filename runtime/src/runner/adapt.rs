@@ -183,7 +183,7 @@ impl Runner {
         let floor = adapt.ladder.floor_level(adapt.floor);
         match verdict {
             Pressure::Violation if level < max => {
-                self.set_level(level + 1, "time violation");
+                self.set_level(level + 1, "time violation", true);
             }
             Pressure::Violation if !adapt.exhausted => {
                 adapt.exhausted = true;
@@ -196,10 +196,10 @@ impl Runner {
                     quality: Some(self.cx.quality),
                     detail: "time violation at the highest level".to_owned(),
                 };
-                self.shared.adaptation_step(step, |_| {});
+                self.shared.adaptation_step(step, true, |_| {});
             }
             Pressure::Spare if level > floor => {
-                self.set_level(level - 1, "spare time");
+                self.set_level(level - 1, "spare time", true);
             }
             _ => {}
         }
@@ -217,8 +217,9 @@ impl Runner {
     /// component stands ([`Ladder::toward`]: a degradation stretches the period first,
     /// a promotion raises the quality first and stops at the floor), applied as the
     /// control port's `SetPeriod` and `SetQuality` are (events `Period`, `Quality`),
-    /// then an `Adaptation` step; the detector starts afresh after its hold-down.
-    pub(super) fn set_level(&mut self, target: u32, why: &str) {
+    /// then an `Adaptation` step (`logged` as for [`Runner::publish_move`]); the
+    /// detector starts afresh after its hold-down.
+    pub(super) fn set_level(&mut self, target: u32, why: &str, logged: bool) {
         let Some(adapt) = self.adapt.as_mut() else {
             return;
         };
@@ -256,12 +257,13 @@ impl Runner {
         if level == from {
             return;
         }
-        self.publish_move(from, level, floor, why);
+        self.publish_move(from, level, floor, why, logged);
     }
 
     /// Publish a move of the adaptation level from `from` to `level` (the floor of
-    /// promotions now `floor`) as an `Adaptation` step saying `why`.
-    pub(super) fn publish_move(&self, from: u32, level: u32, floor: u32, why: &str) {
+    /// promotions now `floor`) as an `Adaptation` step saying `why`, logged at info
+    /// unless not `logged` (a move its supervisor commanded, and logged).
+    pub(super) fn publish_move(&self, from: u32, level: u32, floor: u32, why: &str, logged: bool) {
         let step = Adaptation {
             component: self.cx.name.to_string(),
             action: if level < from {
@@ -275,7 +277,7 @@ impl Runner {
             quality: Some(self.cx.quality),
             detail: why.to_owned(),
         };
-        self.shared.adaptation_step(step, |status| {
+        self.shared.adaptation_step(step, logged, |status| {
             status.level = level;
             status.min_level = floor;
         });
@@ -292,6 +294,7 @@ impl Runner {
         self.set_level(
             level,
             "commanded through the control port (kept by its supervisor)",
+            true,
         );
         let Some(adapt) = self.adapt.as_mut() else {
             return;
@@ -342,6 +345,6 @@ impl Runner {
         adapt.detector.reset(promoted);
         let load = adapt.detector.load();
         self.shared.set_pressure(Pressure::Nominal, load);
-        self.publish_move(from, level, floor, why);
+        self.publish_move(from, level, floor, why, true);
     }
 }

@@ -216,8 +216,14 @@ impl Runner {
                             "degradation level {level} is below {}, where the period and quality set by other means stand (SetPeriod and SetQuality move them)",
                             self.floor_level()
                         ))),
+                        // (A level its supervisor commands is logged by the
+                        // supervisor's own step.)
+                        Some(_) if message.by_supervisor => {
+                            self.set_level(level, "commanded by its supervisor", false);
+                            reply(Reply::Done);
+                        }
                         Some(_) => {
-                            self.set_level(level, "commanded through the control port");
+                            self.set_level(level, "commanded through the control port", true);
                             reply(Reply::Done);
                         }
                     }

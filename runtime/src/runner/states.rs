@@ -446,7 +446,7 @@ impl Runner {
                 shift.away_from.join("'s, ")
             ),
         };
-        self.shared.adaptation_step(step, |_| {});
+        self.shared.adaptation_step(step, true, |_| {});
     }
 
     /// Re-anchor the periodic deadline on the current period, from now.

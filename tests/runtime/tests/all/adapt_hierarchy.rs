@@ -82,7 +82,7 @@ fn a_compound_degrades_within_its_homogeneity_interval_and_promotes_back() {
     assert_eq!(a.adaptation.level, levels[0]);
     assert_eq!(
         a.adaptation.history.last().map(|s| s.detail.as_str()),
-        Some("commanded through the control port")
+        Some("commanded by its supervisor")
     );
 
     // The load drops: everyone back to nominal, through the interval.
