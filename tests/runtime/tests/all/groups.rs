@@ -119,6 +119,35 @@ fn tick(clock: &VirtualClock) {
     clock.advance(PERIOD).expect("settled");
 }
 
+/// A member whose period is set to one not harmonic with the others' (as adaptation's
+/// ladder may) falls due on its own grid: `b` at 15 ms runs alone at 15 and 45 ms,
+/// with what `a` last sent, and at 30 ms in the others' pass, in data-flow order.
+#[test]
+fn a_member_set_to_a_period_not_harmonic_runs_on_its_own_grid() {
+    let log = Log::default();
+    let (system, clock) = chain(&log, step("b", &log));
+    let b = system.handle("b").expect("b");
+    b.command(Command::SetPeriod(Duration::from_millis(15)))
+        .expect("period 15 ms");
+    clock.settle().expect("settled");
+    let expected: [&[&str]; 9] = [
+        &[],
+        &["a:1", "c:1"],
+        &["b:2"],
+        &["a:1", "c:3"],
+        &[],
+        &["a:1", "b:2", "c:3"],
+        &[],
+        &["a:1", "c:3"],
+        &["b:2"],
+    ];
+    for (at, expected) in expected.iter().enumerate() {
+        clock.advance(Duration::from_millis(5)).expect("settled");
+        assert_eq!(log.take(), *expected, "at {} ms", (at + 1) * 5);
+    }
+    assert!(system.shutdown().clean());
+}
+
 #[test]
 fn members_run_in_data_flow_order_and_see_each_others_packets_in_the_same_pass() {
     let log = Log::default();
