@@ -24,7 +24,7 @@
 //! component until it is quiescent at each. A section takes no time on it unless it
 //! says so (`Context::spend` moves the clock on by its cost: so no `max_response`
 //! overrun and no missed deadline happen unless a test advances the clock past them
-//! or a section takes that much), and a `retry ... every` plan step waits on it. Nothing here
+//! or a section takes that much), and a `retry ... every` plan step is a timer on it. Nothing here
 //! reads the real clock for the component's timers: a harness test is
 //! deterministic. (The real-time readings that remain are the monitor's CPU time and
 //! [`crate::Context::now`], wall-clock time for packets' stamps.)

@@ -298,8 +298,9 @@ impl Runner {
     }
 
     /// Run a section and its continuity plan if it fails. With `then` (what the
-    /// section is part of), a member of an execution group retries it later
-    /// ([`Recovery::Later`]); without, a retry waits on the thread.
+    /// section is part of), a `retry` runs it again later, as a timer
+    /// ([`Recovery::Later`]); without (a command's transition, whose reply waits for
+    /// it), a retry waits on the thread.
     pub(super) fn section_with_plan(
         &mut self,
         state: usize,
@@ -390,10 +391,10 @@ impl Runner {
                     if count == 0 {
                         continue;
                     }
-                    // A member of an execution group does not sleep on the group's
-                    // thread: its section is run again when due, and the other
-                    // members run meanwhile.
-                    if let Some(then) = then.filter(|_| self.group.is_some()) {
+                    // The section is run again when due, a timer: commands are
+                    // handled meanwhile (in an execution group, the other members
+                    // run).
+                    if let Some(then) = then {
                         self.retrying = Some(Retrying {
                             state,
                             exception: index,

@@ -116,15 +116,15 @@ enum Recovery {
     Recovered,
     Goto(usize),
     Failed(String),
-    /// A member of an execution group retries a section later ([`Retrying`]): the
-    /// group runs on meanwhile.
+    /// A `retry` runs the section again later ([`Retrying`]): the thread (or the
+    /// group) runs on meanwhile.
     Later,
 }
 
-/// A section of an execution group's member that failed, to be run again when `due`
-/// by its continuity plan's `retry` step number `step`, `left` more times at most; the
-/// rest of the plan follows if none succeeds. Nothing else of the user automaton runs
-/// meanwhile, as on a thread of its own, where the retry sleeps.
+/// A section that failed, to be run again when `due` by its continuity plan's `retry`
+/// step number `step`, `left` more times at most; the rest of the plan follows if none
+/// succeeds. Nothing else of the user automaton runs meanwhile; commands are handled
+/// (and, in an execution group, the other members run).
 struct Retrying {
     state: usize,
     exception: usize,
@@ -213,7 +213,7 @@ pub(crate) struct Runner {
     next_periodic: Option<Instant>,
     reanchored: bool,
     pending_choice: Option<usize>,
-    /// A section retried later (a member of an execution group).
+    /// A section retried later, by a continuity plan's `retry`.
     retrying: Option<Retrying>,
     max_response: Option<Duration>,
     /// The max_response watchdog's view of this component's sections (while it has a

@@ -105,7 +105,7 @@ fn a_may_choice_and_a_retry_plan_on_the_harness_clock() {
     h.push("data", 7u64).unwrap();
     h.settle().unwrap();
     // `exception flaky { retry 2 every 1ms; }`: two failures, then the third call
-    // succeeds; the retries wait on the harness's clock.
+    // succeeds; the retries are timers of the harness's clock, 1 ms apart.
     script.inject(Some(Injected {
         hook: "busy.periodic",
         exception: Some(Exception::Flaky),
@@ -117,7 +117,15 @@ fn a_may_choice_and_a_retry_plan_on_the_harness_clock() {
         *script.handled.lock().unwrap(),
         ["flaky: injected in busy.periodic"]
     );
+    let injected = || script.injected.load(std::sync::atomic::Ordering::SeqCst);
+    assert_eq!((injected(), h.next_due()), (1, Some(ms(1))));
+    h.advance(ms(1)).unwrap();
+    assert_eq!((injected(), h.next_due()), (2, Some(ms(1))));
+    h.advance(ms(1)).unwrap();
     assert_eq!(h.elapsed(), ms(7));
+    // Recovered at 7 ms: the next periodic section is due on its period, at 10 ms.
+    assert_eq!(h.error(), None);
+    assert_eq!(h.next_due(), Some(ms(3)));
     // The next periodic section chooses `idle`.
     script
         .choose_idle

@@ -4,8 +4,9 @@
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
+use std::time::Duration;
 
-use coolbot::{Component, State, System};
+use coolbot::{Clock, Component, Controllable, State, System, VirtualClock};
 use coolbot_runtime_tests::generated::{
     degrade_worker, goto_worker, ignore_worker, plain_worker, worker,
 };
@@ -100,7 +101,7 @@ fn case(kind: Kind, plan: Plan, times: u32, expect: Expect) {
     match kind {
         Kind::Entry => {
             rig.script.inject(Some(injected));
-            rig.command(coolbot::Controllable::Running)
+            rig.command(Controllable::Running)
                 .expect("running");
             rig.wait_user("idle");
             rig.feeder().kick.emit();
@@ -238,4 +239,50 @@ fn no_plan_is_running_error_from_every_section_kind() {
     for kind in KINDS {
         case(kind, NONE, 1, Expect::Fails);
     }
+}
+
+/// A `retry` is a timer of the component's clock, and its thread takes commands while
+/// it waits. On a virtual clock: the periodic section fails at 5 ms, its next attempt
+/// is due 1 ms later; a `suspend` before it is taken at once, nothing runs while
+/// suspended, and the pause moves the attempt (and the periodic deadline it failed
+/// at): the second failure comes 1 ms after the resume, the success 1 ms later, and
+/// the next periodic section on its period with no deadline missed.
+#[test]
+fn a_retry_is_a_timer_and_commands_are_taken_while_it_waits() {
+    let clock = VirtualClock::new();
+    let script = Script::new();
+    let worker = Plan::Retry.worker(&script);
+    let system = System::with_clock(Clock::virtual_clock(&clock));
+    let rig = Rig::start(Rig::with(system, script, worker));
+    rig.run_busy();
+    clock.settle().expect("settled");
+    rig.script.inject(Some(Injected {
+        hook: Kind::Periodic.hook(),
+        exception: Some(Exception::Flaky),
+        times: 2,
+    }));
+    let injected = || rig.script.injected.load(Ordering::SeqCst);
+    let periodics = || rig.script.periodics.load(Ordering::SeqCst);
+    let ms = Duration::from_millis;
+    clock.advance(ms(5)).expect("settled");
+    assert_eq!(injected(), 1);
+    rig.command(Controllable::Suspended).expect("suspended");
+    clock.advance(ms(10)).expect("settled");
+    assert_eq!(injected(), 1, "nothing runs while suspended");
+    rig.command(Controllable::Running).expect("resumed");
+    clock.advance(ms(1)).expect("settled");
+    assert_eq!(injected(), 2);
+    let before = periodics();
+    clock.advance(ms(1)).expect("settled");
+    assert_eq!(periodics(), before + 1, "the third attempt worked");
+    clock.advance(ms(3)).expect("settled");
+    assert_eq!(periodics(), before + 2, "on its period again, at 20 ms");
+    let monitor = rig.handle.snapshot();
+    assert_eq!(monitor.state, State::Running, "{monitor}");
+    assert_eq!(monitor.missed_deadlines, 0, "{monitor}");
+    assert_eq!(
+        *rig.script.handled.lock().unwrap(),
+        ["flaky: injected in busy.periodic"]
+    );
+    assert!(rig.system.shutdown().clean());
 }
