@@ -403,6 +403,7 @@ impl Runner {
                             every,
                             due: later(self.clock, every),
                             then,
+                            arrived: None,
                             place: place.to_owned(),
                             message: message.to_owned(),
                         });
@@ -438,7 +439,7 @@ impl Runner {
         let Some(retrying) = self.retrying.take() else {
             return false;
         };
-        let (state, then) = (retrying.state, retrying.then);
+        let (state, then, arrived) = (retrying.state, retrying.then, retrying.arrived);
         let section = then.section();
         if let Then::Periodic { deadline, .. } = then {
             self.cx.deadline = Some(deadline);
@@ -468,12 +469,29 @@ impl Runner {
             // Another `retry` step of the plan.
             (_, Recovery::Later) => {}
             (Then::Periodic { deadline, period }, outcome) => {
+                // (The period now, if it was set meanwhile: a suspended component's
+                // new period is not applied until it runs.)
+                let period = self.period_of(state).unwrap_or(period);
                 self.periodic_done(state, deadline, period, outcome);
             }
             (Then::Entered, outcome) => self.entered(state, outcome),
             (Then::Enter { target }, outcome) => self.exited(target, self.clock, outcome),
         }
+        self.respond_when_done(arrived);
         true
+    }
+
+    /// The transition an input's arrival `arrived` caused is over unless a section of
+    /// it waits for a retry: measure the response time now, or when that retry's
+    /// transition is over.
+    pub(super) fn respond_when_done(&mut self, arrived: Option<Instant>) {
+        let Some(arrived) = arrived else { return };
+        match self.retrying.as_mut() {
+            Some(retrying) if matches!(retrying.then, Then::Entered | Then::Enter { .. }) => {
+                retrying.arrived = Some(arrived);
+            }
+            _ => self.responded(arrived),
+        }
     }
 
     /// A failure no plan recovered: `running_error`.

@@ -134,6 +134,9 @@ struct Retrying {
     due: Instant,
     /// Which section it is, and what follows it once it worked or its plan ended.
     then: Then,
+    /// The arrival whose transition this section is part of (an input's temporal
+    /// label): its response time is measured once the transition is over.
+    arrived: Option<Instant>,
     /// Where it failed and why, for the plan's messages.
     place: String,
     message: String,
@@ -702,9 +705,7 @@ impl Runner {
                 .and_then(Option::as_ref)
                 .and_then(|label| label.take());
             self.goto(on.target, now);
-            if let Some(arrived) = arrived {
-                self.responded(arrived);
-            }
+            self.respond_when_done(arrived);
             return true;
         }
         // 5. Pull requests.

@@ -211,7 +211,14 @@ impl Runner {
     /// Leave the current user state (its exit section), as part of a default-automaton
     /// transition.
     pub(super) fn exit_user(&mut self) -> Result<(), String> {
-        let result = if self.user_entered && self.spec.states[self.user].exit {
+        // A state whose entry waits for a retry was never entered: its exit does not
+        // run (on a thread that slept through the retries, the command came after
+        // them, to a state entered or to `running_error`).
+        let entering = self
+            .retrying
+            .as_ref()
+            .is_some_and(|retrying| matches!(retrying.then, Then::Entered));
+        let result = if self.user_entered && !entering && self.spec.states[self.user].exit {
             // (A transition of the default automaton ends before the next command:
             // a retry waits on the thread, in a group too.)
             match self.section_with_plan(self.user, Section::Exit, None) {

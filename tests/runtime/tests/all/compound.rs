@@ -2657,9 +2657,12 @@ fn on_a_virtual_clock_packets_held_at_an_exported_input_move_on_without_an_advan
     feed.kick.emit();
     wait_user(&w, "busy");
     // `busy` is published before its entry section runs, and the entry drains the
-    // queue too: settled, w is past its entry and waits for the clock.
+    // queue too. Settling the clock would not wait for it (settling covers timers,
+    // and w came to `busy` on a tick): a command does, which w's thread takes once
+    // the turn that entered `busy` is over.
+    w.command(Command::SetPriority(0))
+        .expect("past busy's entry");
     let clock = rig.rig.clock.clone().expect("a virtual clock");
-    clock.settle().expect("settles");
     for packet in 0..4 {
         feed.data.send(packet);
     }

@@ -101,8 +101,7 @@ fn case(kind: Kind, plan: Plan, times: u32, expect: Expect) {
     match kind {
         Kind::Entry => {
             rig.script.inject(Some(injected));
-            rig.command(Controllable::Running)
-                .expect("running");
+            rig.command(Controllable::Running).expect("running");
             rig.wait_user("idle");
             rig.feeder().kick.emit();
         }
@@ -284,5 +283,47 @@ fn a_retry_is_a_timer_and_commands_are_taken_while_it_waits() {
         *rig.script.handled.lock().unwrap(),
         ["flaky: injected in busy.periodic"]
     );
+    assert!(rig.system.shutdown().clean());
+}
+
+/// A state whose entry section waits for its retry was never entered: a `ready` then
+/// leaves it without its exit section, as on a thread that slept through the retries
+/// the command would have found it entered or in `running_error`.
+#[test]
+fn leaving_a_state_whose_entry_waits_for_its_retry_runs_no_exit_section() {
+    let clock = VirtualClock::new();
+    let script = Script::new();
+    let worker = Plan::Retry.worker(&script);
+    let system = System::with_clock(Clock::virtual_clock(&clock));
+    let rig = Rig::start(Rig::with(system, script, worker));
+    rig.command(Controllable::Running).expect("running");
+    rig.wait_user("idle");
+    rig.script.inject(Some(Injected {
+        hook: Kind::Entry.hook(),
+        exception: Some(Exception::Flaky),
+        times: 2,
+    }));
+    rig.feeder().kick.emit();
+    rig.wait_user("busy");
+    eventually(
+        || rig.script.injected.load(Ordering::SeqCst) == 1,
+        "busy's entry failed once",
+    );
+    clock.settle().expect("settled");
+    rig.command(Controllable::Ready).expect("ready");
+    let monitor = rig.wait_state(State::Ready);
+    assert_eq!(monitor.error, None, "{monitor}");
+    let log = rig.script.log();
+    assert_eq!(
+        log.last().map(String::as_str),
+        Some("busy.entry"),
+        "{log:?}"
+    );
+    assert!(!log.iter().any(|hook| hook == "busy.exit"), "{log:?}");
+    // Nothing of the retry is left: run again, the worker starts in `idle`.
+    clock.advance(Duration::from_millis(5)).expect("settled");
+    assert_eq!(rig.script.injected.load(Ordering::SeqCst), 1);
+    rig.command(Controllable::Running).expect("running again");
+    rig.wait_user("idle");
     assert!(rig.system.shutdown().clean());
 }

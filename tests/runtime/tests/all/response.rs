@@ -11,8 +11,8 @@ use std::time::Duration;
 use coolbot::adapt::AdaptAction;
 use coolbot::crossbeam_channel::{self, Sender};
 use coolbot::port::DataOut;
-use coolbot::{AdaptConfig, MonitorEvent, SectionResult, System};
-use coolbot_runtime_tests::generated::{job_feeder, job_server};
+use coolbot::{AdaptConfig, Clock, MonitorEvent, SectionResult, System, VirtualClock};
+use coolbot_runtime_tests::generated::{job_feeder, job_server, retrying_server};
 use coolbot_runtime_tests::support::{WAIT, eventually};
 
 /// `JobServer`'s `max_response` (`cool/response.cool`).
@@ -187,6 +187,62 @@ fn late_responses_degrade_the_quality_and_short_ones_promote_it_back() {
             .any(|(_, quality)| *quality == 1),
         "jobs ran at quality 1 meanwhile"
     );
+    let report = system.shutdown();
+    assert!(report.clean(), "{report:?}");
+}
+
+/// `RetryingServer`'s behaviour: the entry fails `refusals` times, then takes the job.
+struct Refusing {
+    refusals: u32,
+}
+
+impl retrying_server::Behavior for Refusing {
+    fn work_entry(&mut self, cx: &mut retrying_server::Cx<'_>) -> SectionResult {
+        if self.refusals > 0 {
+            self.refusals -= 1;
+            return Err(retrying_server::Exception::Busy.raise("not yet"));
+        }
+        cx.inputs.jobs.recv();
+        Ok(())
+    }
+
+    fn on_busy(&mut self, _cx: &mut retrying_server::Cx<'_>, _message: &str) {}
+}
+
+/// The transition a job causes is over when its entry section's retry worked: on a
+/// virtual clock, the entry fails at 0 and 10 ms and works at 20 ms, so the response
+/// takes 20 ms, beyond the 15 ms bound.
+#[test]
+fn a_response_ends_when_the_retried_entry_of_its_transition_works() {
+    let clock = VirtualClock::new();
+    let mut system = System::with_clock(Clock::virtual_clock(&clock));
+    let handle = system
+        .add(retrying_server::component("s", Refusing { refusals: 2 }))
+        .expect("add server");
+    let (hand, feed) = crossbeam_channel::bounded(1);
+    system
+        .add(job_feeder::component("f", Hand(hand)))
+        .expect("add feeder");
+    system.connect("f.jobs", "s.jobs").expect("connect");
+    system.run_all().expect("run");
+    let feed = feed.recv_timeout(WAIT).expect("the feeder started");
+    clock.settle().expect("settled");
+    feed.send(1);
+    poll(&handle, "in `work`", |m| {
+        m.user_state.as_deref() == Some("work")
+    });
+    // (Taken once the turn that entered `work`, with the entry's first attempt, is over.)
+    handle
+        .command(coolbot::Command::SetPriority(0))
+        .expect("a round trip");
+    assert_eq!(handle.snapshot().response.count, 0, "no response yet");
+    for _ in 0..2 {
+        clock.advance(Duration::from_millis(10)).expect("settled");
+    }
+    let monitor = handle.snapshot();
+    assert_eq!(monitor.response.count, 1, "{:?}", monitor.response);
+    assert_eq!(monitor.response.worst, Duration::from_millis(20));
+    assert_eq!(monitor.response.late, 1);
     let report = system.shutdown();
     assert!(report.clean(), "{report:?}");
 }
