@@ -169,8 +169,12 @@ fn a_range_server_alone_in_its_harness_streams_and_retries_on_the_virtual_clock(
     h.advance(Duration::from_millis(199)).unwrap();
     assert_eq!(h.sent_scan().unwrap().len(), 3);
     // The fourth periodic section (at 200ms) raises `sensor_timeout` once; its plan
-    // (`retry 2 every 50ms`) runs the section again 50ms later on the harness clock.
+    // (`retry 2 every 50ms`) runs the section again 50ms later, a timer of the harness
+    // clock.
     h.advance(Duration::from_millis(1)).unwrap();
+    assert_eq!(h.sent_scan().unwrap().len(), 0);
+    assert_eq!(h.inner().next_due(), Some(Duration::from_millis(50)));
+    h.advance(Duration::from_millis(50)).unwrap();
     let scans = h.sent_scan().unwrap();
     assert_eq!(scans.len(), 1);
     assert_eq!(scans[0].ranges, [h.config().emergency_distance * 10.0; 16]);
