@@ -189,6 +189,14 @@ pub fn on_virtual_clock() -> (System, Arc<VirtualClock>) {
     (System::with_clock(Clock::virtual_clock(&clock)), clock)
 }
 
+/// `component` added to a system on a fresh virtual clock, and run.
+pub fn running_on_virtual_clock(component: Component) -> (System, Handle, Arc<VirtualClock>) {
+    let (mut system, clock) = on_virtual_clock();
+    let handle = system.add(component).expect("add");
+    system.run_all().expect("run");
+    (system, handle, clock)
+}
+
 /// The virtual time a test steps at most before it gives up on a condition.
 pub const VIRTUAL_LIMIT: Duration = Duration::from_secs(120);
 

@@ -20,9 +20,7 @@ fn a_move_a_supervisor_commands_is_logged_once() {
         .instance(member("b", -1, &heavy))
         .build()
         .expect("build");
-    let (mut system, clock) = adapt::on_virtual_clock();
-    let group = system.add(group).expect("add");
-    system.run_all().expect("run");
+    let (system, group, clock) = adapt::running_on_virtual_clock(group);
     let b = group.instance("b").expect("b");
     let monitor = adapt::step_until(&clock, &b, "b degraded", |m| m.adaptation.level >= 1);
     let applied = monitor

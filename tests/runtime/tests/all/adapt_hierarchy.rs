@@ -281,9 +281,7 @@ fn a_compound_with_adaptation_off_leaves_its_instances_alone() {
         .adaptation(coolbot::AdaptConfig::off())
         .build()
         .expect("build");
-    let (mut system, clock) = adapt::on_virtual_clock();
-    let group = system.add(group).expect("add");
-    system.run_all().expect("run");
+    let (system, group, clock) = adapt::running_on_virtual_clock(group);
     let b = group.instance("b").expect("b");
     let monitor = adapt::step_until(&clock, &b, "a violation, published", |m| {
         m.adaptation.pressure == Pressure::Violation
@@ -315,9 +313,7 @@ fn a_quality_or_period_set_on_an_instance_of_a_compound_is_kept() {
         .instance(member("b", -2, &light))
         .build()
         .expect("build");
-    let (mut system, clock) = adapt::on_virtual_clock();
-    let group = system.add(group).expect("add");
-    system.run_all().expect("run");
+    let (system, group, clock) = adapt::running_on_virtual_clock(group);
     let a = group.instance("a").expect("a");
     let b = group.instance("b").expect("b");
     for handle in [&a, &b] {
@@ -375,9 +371,7 @@ fn a_degradation_commanded_on_an_instance_of_a_compound_is_kept() {
         .instance(member("a", -1, &light))
         .build()
         .expect("build");
-    let (mut system, clock) = adapt::on_virtual_clock();
-    let group = system.add(group).expect("add");
-    system.run_all().expect("run");
+    let (system, group, clock) = adapt::running_on_virtual_clock(group);
     let a = group.instance("a").expect("a");
     a.wait_state(coolbot::State::Running, adapt::WAIT)
         .expect("running");
@@ -430,9 +424,7 @@ fn a_selector_answer_outside_the_candidates_does_not_fail_the_compound() {
         .adaptation_selector(Wrong)
         .build()
         .expect("build");
-    let (mut system, clock) = adapt::on_virtual_clock();
-    let group = system.add(group).expect("add");
-    system.run_all().expect("run");
+    let (system, group, clock) = adapt::running_on_virtual_clock(group);
     let b = group.instance("b").expect("b");
     adapt::step_until(&clock, &b, "b degraded", |m| m.adaptation.level >= 1);
     let monitor = group.snapshot();
@@ -463,9 +455,7 @@ fn instances_publish_their_settling_periods() {
         .instance(member("b", -1, &light))
         .build()
         .expect("build");
-    let (mut system, clock) = adapt::on_virtual_clock();
-    let group = system.add(group).expect("add");
-    system.run_all().expect("run");
+    let (system, group, clock) = adapt::running_on_virtual_clock(group);
     let a = group.instance("a").expect("a");
     let b = group.instance("b").expect("b");
     adapt::step_until(&clock, &a, "running", |m| {
@@ -489,9 +479,7 @@ fn a_continuity_plan_degradation_is_not_reverted_by_the_compound() {
         .instance(member("q", -1, &light))
         .build()
         .expect("build");
-    let (mut system, clock) = adapt::on_virtual_clock();
-    let group = system.add(group).expect("add");
-    system.run_all().expect("run");
+    let (system, group, clock) = adapt::running_on_virtual_clock(group);
     let p = group.instance("p").expect("p");
     p.wait_state(coolbot::State::Running, adapt::WAIT)
         .expect("running");
