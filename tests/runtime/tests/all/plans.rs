@@ -240,6 +240,15 @@ fn no_plan_is_running_error_from_every_section_kind() {
     }
 }
 
+/// The rig's worker under `retry 2 every 1ms`, started on a fresh virtual clock.
+fn retrying_on_virtual_clock() -> (Rig, Arc<VirtualClock>) {
+    let clock = VirtualClock::new();
+    let script = Script::new();
+    let worker = Plan::Retry.worker(&script);
+    let system = System::with_clock(Clock::virtual_clock(&clock));
+    (Rig::start(Rig::with(system, script, worker)), clock)
+}
+
 /// A `retry` is a timer of the component's clock, and its thread takes commands while
 /// it waits. On a virtual clock: the periodic section fails at 5 ms, its next attempt
 /// is due 1 ms later; a `suspend` before it is taken at once, nothing runs while
@@ -248,11 +257,7 @@ fn no_plan_is_running_error_from_every_section_kind() {
 /// the next periodic section on its period with no deadline missed.
 #[test]
 fn a_retry_is_a_timer_and_commands_are_taken_while_it_waits() {
-    let clock = VirtualClock::new();
-    let script = Script::new();
-    let worker = Plan::Retry.worker(&script);
-    let system = System::with_clock(Clock::virtual_clock(&clock));
-    let rig = Rig::start(Rig::with(system, script, worker));
+    let (rig, clock) = retrying_on_virtual_clock();
     rig.run_busy();
     clock.settle().expect("settled");
     rig.script.inject(Some(Injected {
@@ -291,11 +296,7 @@ fn a_retry_is_a_timer_and_commands_are_taken_while_it_waits() {
 /// the command would have found it entered or in `running_error`.
 #[test]
 fn leaving_a_state_whose_entry_waits_for_its_retry_runs_no_exit_section() {
-    let clock = VirtualClock::new();
-    let script = Script::new();
-    let worker = Plan::Retry.worker(&script);
-    let system = System::with_clock(Clock::virtual_clock(&clock));
-    let rig = Rig::start(Rig::with(system, script, worker));
+    let (rig, clock) = retrying_on_virtual_clock();
     rig.command(Controllable::Running).expect("running");
     rig.wait_user("idle");
     rig.script.inject(Some(Injected {
