@@ -564,8 +564,10 @@ impl Runner {
             self.cx.end_requested = false;
             return Turn::Stopped;
         }
-        // 2. The task finished.
-        if self.cx.end_requested {
+        // 2. The task finished (once a section's retries are over: a section that
+        // asked to end and failed is retried first, as on a thread that slept
+        // through its retries).
+        if self.cx.end_requested && self.retrying.is_none() {
             self.cx.end_requested = false;
             self.apply(Event::Finished);
             return Turn::Worked;

@@ -99,6 +99,9 @@ pub struct Script {
     pub panic_in: Mutex<Option<&'static str>>,
     pub fault: Mutex<Option<Injected>>,
     pub end_in_periodic: AtomicBool,
+    /// `busy`'s periodic section asks to end before anything else (an injected
+    /// fault then fails the section that asked).
+    pub end_first: AtomicBool,
     pub sleep_in_periodic: Mutex<Option<Duration>>,
     pub choose_idle: AtomicBool,
     pub received: AtomicU64,
@@ -307,6 +310,13 @@ macro_rules! scripted {
                     Ok(())
                 }
                 fn busy_periodic(&mut self, cx: &mut m::Cx<'_>) -> ::coolbot::SectionResult {
+                    if self
+                        .script
+                        .end_first
+                        .load(::std::sync::atomic::Ordering::SeqCst)
+                    {
+                        cx.rt.end();
+                    }
                     self.script.hit("busy.periodic")?;
                     self.script
                         .periodics

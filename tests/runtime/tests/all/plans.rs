@@ -328,3 +328,26 @@ fn leaving_a_state_whose_entry_waits_for_its_retry_runs_no_exit_section() {
     rig.wait_user("idle");
     assert!(rig.system.shutdown().clean());
 }
+
+/// A section that asked to end and then failed is retried before the task ends, as
+/// on a thread that slept through its retries: the attempt at 6 ms asks again and
+/// works, and only then does the worker go to `end`.
+#[test]
+fn a_section_that_asked_to_end_and_failed_is_retried_before_the_end() {
+    let (rig, clock) = retrying_on_virtual_clock();
+    rig.run_busy();
+    clock.settle().expect("settled");
+    rig.script.end_first.store(true, Ordering::SeqCst);
+    rig.script.inject(Some(Injected {
+        hook: Kind::Periodic.hook(),
+        exception: Some(Exception::Flaky),
+        times: 1,
+    }));
+    clock.advance(Duration::from_millis(5)).expect("settled");
+    assert_eq!(rig.handle.state(), State::Running);
+    assert_eq!(rig.script.periodics.load(Ordering::SeqCst), 0);
+    clock.advance(Duration::from_millis(1)).expect("settled");
+    let monitor = rig.wait_state(State::End);
+    assert_eq!(rig.script.periodics.load(Ordering::SeqCst), 1, "{monitor}");
+    assert!(rig.system.shutdown().clean());
+}
