@@ -419,8 +419,13 @@ impl Runner {
                             None => std::thread::sleep(every),
                         }
                         self.clock = self.time.now();
-                        if self.run_section(state, section).is_ok() {
-                            return Recovery::Recovered;
+                        match self.run_section(state, section) {
+                            Ok(()) => return Recovery::Recovered,
+                            Err(failure) => {
+                                if let Some(failed) = beyond_plan(failure, place) {
+                                    return failed;
+                                }
+                            }
                         }
                     }
                 }
@@ -444,10 +449,12 @@ impl Runner {
         if let Then::Periodic { deadline, .. } = then {
             self.cx.deadline = Some(deadline);
         }
-        let failed = self.run_section(state, section).is_err();
+        let attempt = self.run_section(state, section);
         self.cx.deadline = None;
-        let outcome = if !failed {
+        let outcome = if attempt.is_ok() {
             Recovery::Recovered
+        } else if let Some(failed) = attempt.err().and_then(|f| beyond_plan(f, &retrying.place)) {
+            failed
         } else if retrying.left > 1 {
             self.retrying = Some(Retrying {
                 left: retrying.left - 1,
@@ -498,6 +505,17 @@ impl Runner {
     pub(super) fn fail(&mut self, message: String) {
         self.set_error(Some(message));
         self.apply(Event::Fault);
+    }
+}
+
+/// A retried attempt that panicked or overran: no continuity plan goes on for it
+/// (`Runner::recover`), the component fails. `None` for a fault, which the plan's
+/// retries are for.
+fn beyond_plan(failure: Failure, place: &str) -> Option<Recovery> {
+    match failure {
+        Failure::Fault(_) => None,
+        Failure::Panic(message) => Some(Recovery::Failed(format!("panic in {place}: {message}"))),
+        Failure::Overrun(message) => Some(Recovery::Failed(message)),
     }
 }
 

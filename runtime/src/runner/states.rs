@@ -140,6 +140,10 @@ impl Runner {
             // failed at moves with it: the pause is no missed deadline.
             if let Some(retrying) = self.retrying.as_mut() {
                 retrying.due = later(retrying.due, pause);
+                // (Time suspended is no response time.)
+                if let Some(arrived) = retrying.arrived.as_mut() {
+                    *arrived = later(*arrived, pause);
+                }
                 if let Then::Periodic { deadline, .. } = &mut retrying.then {
                     *deadline = later(*deadline, pause);
                 }
@@ -458,7 +462,13 @@ impl Runner {
 
     /// Re-anchor the periodic deadline on the current period, from now.
     pub(super) fn reanchor(&mut self) {
-        if self.user_entered && self.state == State::Running {
+        // (While a periodic section waits for its retry, the next deadline is set when
+        // the retries are over, with the period then.)
+        let retrying_periodic = self
+            .retrying
+            .as_ref()
+            .is_some_and(|retrying| matches!(retrying.then, Then::Periodic { .. }));
+        if self.user_entered && self.state == State::Running && !retrying_periodic {
             self.next_periodic = self
                 .period_of(self.user)
                 .map(|period| self.deadline_after(self.time.now(), period));

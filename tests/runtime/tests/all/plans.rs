@@ -351,3 +351,56 @@ fn a_section_that_asked_to_end_and_failed_is_retried_before_the_end() {
     assert_eq!(rig.script.periodics.load(Ordering::SeqCst), 1, "{monitor}");
     assert!(rig.system.shutdown().clean());
 }
+
+/// A period set while a periodic section waits for its retry applies once the
+/// retries are over: set to 1 ms at 5 ms, the attempt at 6 ms works and runs alone
+/// (it took the deadline at 6 ms, counted missed), then one section a millisecond.
+#[test]
+fn a_period_set_during_a_retry_applies_after_it() {
+    let (rig, clock) = retrying_on_virtual_clock();
+    rig.run_busy();
+    clock.settle().expect("settled");
+    rig.script.inject(Some(Injected {
+        hook: Kind::Periodic.hook(),
+        exception: Some(Exception::Flaky),
+        times: 1,
+    }));
+    let periodics = || rig.script.periodics.load(Ordering::SeqCst);
+    clock.advance(Duration::from_millis(5)).expect("settled");
+    rig.handle
+        .command(coolbot::Command::SetPeriod(Duration::from_millis(1)))
+        .expect("period 1 ms");
+    clock.advance(Duration::from_millis(1)).expect("settled");
+    assert_eq!(periodics(), 1, "the retry alone, at 6 ms");
+    assert_eq!(rig.handle.snapshot().missed_deadlines, 1);
+    clock.advance(Duration::from_millis(1)).expect("settled");
+    assert_eq!(periodics(), 2, "at 7 ms");
+    assert!(rig.system.shutdown().clean());
+}
+
+/// A retried attempt that panics fails the component at once, as a first panic does:
+/// no continuity plan goes on for a panic.
+#[test]
+fn a_retried_attempt_that_panics_is_running_error_at_once() {
+    let (rig, clock) = retrying_on_virtual_clock();
+    rig.run_busy();
+    clock.settle().expect("settled");
+    rig.script.inject(Some(Injected {
+        hook: Kind::Periodic.hook(),
+        exception: Some(Exception::Flaky),
+        times: 1,
+    }));
+    clock.advance(Duration::from_millis(5)).expect("settled");
+    rig.script.panic_in(Some(Kind::Periodic.hook()));
+    clock.advance(Duration::from_millis(1)).expect("settled");
+    let monitor = rig.handle.snapshot();
+    assert_eq!(monitor.state, State::RunningError, "{monitor}");
+    assert!(
+        monitor
+            .error
+            .as_deref()
+            .is_some_and(|error| error.starts_with("panic in state `busy` (Periodic section)")),
+        "{monitor}"
+    );
+    assert!(rig.system.shutdown().clean());
+}

@@ -214,6 +214,19 @@ impl retrying_server::Behavior for Refusing {
 /// takes 20 ms, beyond the 15 ms bound.
 #[test]
 fn a_response_ends_when_the_retried_entry_of_its_transition_works() {
+    retried_response(None);
+}
+
+/// The same with the server suspended for 500 ms between two attempts: time
+/// suspended is no response time, the response still takes 20 ms.
+#[test]
+fn time_suspended_during_a_retry_is_no_response_time() {
+    retried_response(Some(Duration::from_millis(500)));
+}
+
+/// A job to `RetryingServer` on a virtual clock, its entry refused twice; with
+/// `pause`, suspended that long after the first retry.
+fn retried_response(pause: Option<Duration>) {
     let clock = VirtualClock::new();
     let mut system = System::with_clock(Clock::virtual_clock(&clock));
     let handle = system
@@ -236,9 +249,18 @@ fn a_response_ends_when_the_retried_entry_of_its_transition_works() {
         .command(coolbot::Command::SetPriority(0))
         .expect("a round trip");
     assert_eq!(handle.snapshot().response.count, 0, "no response yet");
-    for _ in 0..2 {
-        clock.advance(Duration::from_millis(10)).expect("settled");
+    clock.advance(Duration::from_millis(10)).expect("settled");
+    if let Some(pause) = pause {
+        let state = |target| coolbot::Command::SetState(target);
+        handle
+            .command(state(coolbot::Controllable::Suspended))
+            .expect("suspended");
+        clock.advance(pause).expect("settled");
+        handle
+            .command(state(coolbot::Controllable::Running))
+            .expect("resumed");
     }
+    clock.advance(Duration::from_millis(10)).expect("settled");
     let monitor = handle.snapshot();
     assert_eq!(monitor.response.count, 1, "{:?}", monitor.response);
     assert_eq!(monitor.response.worst, Duration::from_millis(20));
