@@ -249,6 +249,20 @@ fn retrying_on_virtual_clock() -> (Rig, Arc<VirtualClock>) {
     (Rig::start(Rig::with(system, script, worker)), clock)
 }
 
+/// That rig in `busy` (entered at 0 ms), its periodic section (due at 5 ms) to raise
+/// `flaky` the next `times` times.
+fn busy_failing_periodically(times: u32) -> (Rig, Arc<VirtualClock>) {
+    let (rig, clock) = retrying_on_virtual_clock();
+    rig.run_busy();
+    clock.settle().expect("settled");
+    rig.script.inject(Some(Injected {
+        hook: Kind::Periodic.hook(),
+        exception: Some(Exception::Flaky),
+        times,
+    }));
+    (rig, clock)
+}
+
 /// A `retry` is a timer of the component's clock, and its thread takes commands while
 /// it waits. On a virtual clock: the periodic section fails at 5 ms, its next attempt
 /// is due 1 ms later; a `suspend` before it is taken at once, nothing runs while
@@ -257,14 +271,7 @@ fn retrying_on_virtual_clock() -> (Rig, Arc<VirtualClock>) {
 /// the next periodic section on its period with no deadline missed.
 #[test]
 fn a_retry_is_a_timer_and_commands_are_taken_while_it_waits() {
-    let (rig, clock) = retrying_on_virtual_clock();
-    rig.run_busy();
-    clock.settle().expect("settled");
-    rig.script.inject(Some(Injected {
-        hook: Kind::Periodic.hook(),
-        exception: Some(Exception::Flaky),
-        times: 2,
-    }));
+    let (rig, clock) = busy_failing_periodically(2);
     let injected = || rig.script.injected.load(Ordering::SeqCst);
     let periodics = || rig.script.periodics.load(Ordering::SeqCst);
     let ms = Duration::from_millis;
@@ -334,15 +341,8 @@ fn leaving_a_state_whose_entry_waits_for_its_retry_runs_no_exit_section() {
 /// works, and only then does the worker go to `end`.
 #[test]
 fn a_section_that_asked_to_end_and_failed_is_retried_before_the_end() {
-    let (rig, clock) = retrying_on_virtual_clock();
-    rig.run_busy();
-    clock.settle().expect("settled");
+    let (rig, clock) = busy_failing_periodically(1);
     rig.script.end_first.store(true, Ordering::SeqCst);
-    rig.script.inject(Some(Injected {
-        hook: Kind::Periodic.hook(),
-        exception: Some(Exception::Flaky),
-        times: 1,
-    }));
     clock.advance(Duration::from_millis(5)).expect("settled");
     assert_eq!(rig.handle.state(), State::Running);
     assert_eq!(rig.script.periodics.load(Ordering::SeqCst), 0);
@@ -357,14 +357,7 @@ fn a_section_that_asked_to_end_and_failed_is_retried_before_the_end() {
 /// (it took the deadline at 6 ms, counted missed), then one section a millisecond.
 #[test]
 fn a_period_set_during_a_retry_applies_after_it() {
-    let (rig, clock) = retrying_on_virtual_clock();
-    rig.run_busy();
-    clock.settle().expect("settled");
-    rig.script.inject(Some(Injected {
-        hook: Kind::Periodic.hook(),
-        exception: Some(Exception::Flaky),
-        times: 1,
-    }));
+    let (rig, clock) = busy_failing_periodically(1);
     let periodics = || rig.script.periodics.load(Ordering::SeqCst);
     clock.advance(Duration::from_millis(5)).expect("settled");
     rig.handle
@@ -382,14 +375,7 @@ fn a_period_set_during_a_retry_applies_after_it() {
 /// no continuity plan goes on for a panic.
 #[test]
 fn a_retried_attempt_that_panics_is_running_error_at_once() {
-    let (rig, clock) = retrying_on_virtual_clock();
-    rig.run_busy();
-    clock.settle().expect("settled");
-    rig.script.inject(Some(Injected {
-        hook: Kind::Periodic.hook(),
-        exception: Some(Exception::Flaky),
-        times: 1,
-    }));
+    let (rig, clock) = busy_failing_periodically(1);
     clock.advance(Duration::from_millis(5)).expect("settled");
     rig.script.panic_in(Some(Kind::Periodic.hook()));
     clock.advance(Duration::from_millis(1)).expect("settled");
